@@ -1,0 +1,136 @@
+"""Throughput of the reference ER-MRL pipeline (SB3 PPO + ReservoirPy), for comparison.
+
+Each agent is a stable-baselines3 ``PPO("MlpPolicy", env, seed=seed)`` with default
+hyperparameters, trained with ``model.learn(timesteps)`` on a Gymnasium env whose
+observation is replaced by the state of a ReservoirPy reservoir fed with
+concat(obs, action encoding, reward) at every step. One process per agent (seeds
+0..A-1), at most ``--procs`` at a time. Prints agent-steps/s and can write a JSON.
+
+Example:
+    python benchmarks/reference_pipeline.py --env CartPoleNoVel-v1 --agents 4 \\
+        --timesteps 20000 --procs 2 --json out.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import json
+import multiprocessing as mp
+import os
+import sys
+import time
+
+ENVS = ("CartPoleNoVel-v1", "HalfCheetah-v5")
+FIX = "run `make reference` (or `pip install torch==2.13.0 && pip install -e .[reference]`)"
+
+
+def check_deps() -> None:
+    """Exit with code 2 and a one-line hint if the reference stack is missing."""
+    missing = []
+    for mod in ("torch", "stable_baselines3", "reservoirpy"):
+        try:
+            __import__(mod)
+        except ImportError:
+            missing.append(mod)
+    if missing:
+        print(f"error: missing {', '.join(missing)}; {FIX}", file=sys.stderr)
+        sys.exit(2)
+
+
+def make_env(name: str, seed: int):
+    """Build the reservoir-wrapped env: CartPole-v1 without velocities, or HalfCheetah-v5."""
+    import gymnasium as gym
+    import numpy as np
+    from reservoirpy.nodes import Reservoir
+
+    class ReservoirWrapper(gym.Wrapper):
+        """Observation := state of a 100-unit reservoir driven by (obs, action, reward)."""
+
+        def __init__(self, env):
+            super().__init__(env)
+            self.discrete = isinstance(env.action_space, gym.spaces.Discrete)
+            self.res = Reservoir(units=100, lr=0.5, sr=0.95, input_scaling=1.0, seed=seed)
+            self.observation_space = gym.spaces.Box(-1.0, 1.0, (100,), np.float32)
+
+        def _encode(self, action):
+            if self.discrete:
+                return np.eye(self.env.action_space.n)[int(action)]
+            return np.asarray(action, dtype=np.float64).ravel()
+
+        def _feed(self, obs, act_enc, reward):
+            x = np.concatenate([np.ravel(obs), act_enc, [float(reward)]])
+            # ReservoirPy 0.4: Node.__call__ is a single step on a 1-D (features,) vector;
+            # the (1, features) input of 0.3 is rejected.
+            return self.res(x).astype(np.float32)
+
+        def reset(self, *, seed=None, options=None):
+            if self.res.initialized:  # 0.4: reset() before the first call raises
+                self.res.reset()
+            obs, info = self.env.reset(seed=seed, options=options)
+            zeros = np.zeros(self.env.action_space.n if self.discrete else self.env.action_space.shape[0])
+            return self._feed(obs, zeros, 0.0), info
+
+        def step(self, action):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            return self._feed(obs, self._encode(action), reward), reward, terminated, truncated, info
+
+    if name == "CartPoleNoVel-v1":
+        env = gym.make("CartPole-v1")
+        keep = [0, 2]  # cart position, pole angle; drop the velocities (dims 1, 3)
+        box = env.observation_space
+        env = gym.wrappers.TransformObservation(
+            env, lambda o: o[keep], gym.spaces.Box(box.low[keep], box.high[keep], dtype=box.dtype)
+        )
+    else:
+        env = gym.make(name)
+    return ReservoirWrapper(env)
+
+
+def train_one(env_name: str, seed: int, timesteps: int) -> float:
+    """Worker: train one PPO agent; return its wall time in seconds (learn() only)."""
+    import torch
+    from stable_baselines3 import PPO
+
+    torch.set_num_threads(1)
+    model = PPO("MlpPolicy", make_env(env_name, seed), seed=seed, device="cpu", verbose=0)
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=timesteps)
+    return time.perf_counter() - t0
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--env", choices=ENVS, default="CartPoleNoVel-v1", help="environment (default: %(default)s)")
+    p.add_argument("--agents", type=int, default=4, help="independent trainings, seeds 0..A-1 (default: %(default)s)")
+    p.add_argument("--timesteps", type=int, default=20000, help="model.learn() budget per agent (default: %(default)s)")
+    p.add_argument("--procs", type=int, default=2, help="max worker processes at a time (default: %(default)s)")
+    p.add_argument("--json", metavar="PATH", help="write the results as JSON to PATH")
+    a = p.parse_args(argv)
+    check_deps()
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = "1"  # inherited by the spawned workers before numpy/torch load
+
+    t0 = time.perf_counter()
+    with cf.ProcessPoolExecutor(max_workers=a.procs, mp_context=mp.get_context("spawn")) as pool:
+        jobs = [pool.submit(train_one, a.env, s, a.timesteps) for s in range(a.agents)]
+        per_agent = [j.result() for j in jobs]
+    wall = time.perf_counter() - t0
+
+    # SB3 rounds learn() up to whole rollouts (n_steps=2048); report the requested budget.
+    res = {
+        "env": a.env, "agents": a.agents, "timesteps": a.timesteps, "procs": a.procs, "wall_s": wall,
+        "agent_steps_per_s": a.agents * a.timesteps / wall,
+        "per_agent_steps_per_s": [a.timesteps / t for t in per_agent],
+    }
+    print(f"{a.env}: {a.agents} agents x {a.timesteps} steps, {a.procs} procs, wall {wall:.1f}s")
+    print(f"total: {res['agent_steps_per_s']:.0f} agent-steps/s (incl. process start-up)")
+    print("per process: " + ", ".join(f"{v:.0f}" for v in res["per_agent_steps_per_s"]) + " steps/s (learn() only)")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(res, f, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,70 @@
+"""PPO hyperparameters. The defaults are stable-baselines3's PPO defaults, which the paper used (App. A.2.2)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from ermrl.errors import ConfigError
+
+
+@dataclasses.dataclass(frozen=True)
+class PPOConfig:
+    """Static PPO settings (they set array shapes or loop lengths), except ``learning_rate``,
+    which is passed to the trainer per agent and so can differ inside one population."""
+
+    n_envs: int = 1
+    """Parallel envs per agent (SB3 default 1). The rollout buffer holds n_steps × n_envs transitions."""
+    n_steps: int = 2048
+    """Env steps per env between updates."""
+    batch_size: int = 64
+    """Minibatch size; must divide n_steps × n_envs."""
+    n_epochs: int = 10
+    """Passes over the rollout buffer per update."""
+    learning_rate: float = 3e-4
+    """Adam step size (the paper uses 1e-4 on partially observable tasks); constant, as in SB3."""
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    adam_eps: float = 1e-5
+    """Adam's epsilon (SB3 passes eps=1e-5 to torch.optim.Adam)."""
+    normalize_advantage: bool = True
+    """Per-minibatch normalization with the unbiased std, as torch's ``Tensor.std`` computes it."""
+    hidden: tuple[int, ...] = (64, 64)
+    """Hidden widths of the separate actor and critic tanh MLPs (SB3 MlpPolicy)."""
+    log_std_init: float = 0.0
+    """Initial state-independent log std of the Gaussian policy (Box actions)."""
+
+    def __post_init__(self):
+        buffer = self.n_steps * self.n_envs
+        if min(self.n_envs, self.n_steps, self.batch_size, self.n_epochs) < 1:
+            raise ConfigError("n_envs, n_steps, batch_size and n_epochs must all be >= 1")
+        if buffer % self.batch_size:
+            raise ConfigError(
+                f"batch_size {self.batch_size} must divide n_steps × n_envs = {buffer}; pick a divisor of {buffer}"
+            )
+        if not (self.learning_rate > 0 and self.learning_rate < 1):
+            raise ConfigError(f"learning rate {self.learning_rate} is outside (0, 1); the paper uses 3e-4 or 1e-4")
+
+    @property
+    def buffer_size(self) -> int:
+        return self.n_steps * self.n_envs
+
+    @property
+    def n_minibatches(self) -> int:
+        return self.buffer_size // self.batch_size
+
+    def iterations(self, total_timesteps: int) -> int:
+        """Rollout/update cycles that SB3's ``learn(total_timesteps)`` runs: it stops once steps >= total."""
+        return max(1, -(-total_timesteps // self.buffer_size))
+
+
+SB3_DEFAULTS = PPOConfig()
+"""stable-baselines3 PPO defaults (1 env, 2048 steps, 64 per batch, 10 epochs)."""
+
+FAST = PPOConfig(n_envs=8, n_steps=256, batch_size=512, n_epochs=4)
+"""A PureJaxRL-like preset: more envs, fewer and larger minibatches. Not the paper's setting."""
+
+PRESETS = {"sb3": SB3_DEFAULTS, "fast": FAST}

@@ -1,0 +1,141 @@
+"""Training results: per-agent episodes, learning curves and fitness (paper §3, "Outer loop").
+
+Fitness is the mean return of the last 10 completed *training* episodes of an agent, as the reference's
+RewardsSavingWrapper computes it; a Φ's fitness is the mean over its seeds.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+
+FITNESS_EPISODES = 10
+"""Episodes averaged for an agent's fitness (paper: "the final 10 episodes")."""
+CURVE_WINDOW = 100
+"""Episodes averaged per curve point, like SB3's ``rollout/ep_rew_mean`` that the paper's curves plot."""
+
+
+@dataclasses.dataclass
+class Episodes:
+    """The completed training episodes of one agent, in order of completion."""
+
+    timestep: np.ndarray
+    """(E,) int: the agent's env-step count when the episode ended (summed over its envs)."""
+    ret: np.ndarray
+    """(E,) float: undiscounted return."""
+    length: np.ndarray
+    """(E,) int."""
+
+
+def fitness(episodes: Episodes, last: int = FITNESS_EPISODES) -> float:
+    """Mean return of the last ``last`` completed episodes; NaN when none completed."""
+    if len(episodes.ret) == 0:
+        return float("nan")
+    return float(np.mean(episodes.ret[-last:]))
+
+
+@dataclasses.dataclass
+class Results:
+    """What a population's training returns. Agent i has seed ``seeds[i]`` and Φ ``phi[:, i]``."""
+
+    env_id: str
+    total_timesteps: int
+    timesteps_per_iteration: int
+    seeds: np.ndarray
+    """(A,)"""
+    phi: dict
+    """{"sr", "lr", "iss"} -> (A, K) arrays."""
+    learning_rate: np.ndarray
+    episodes: list[Episodes]
+    """One per agent."""
+    finite: np.ndarray
+    """(A,) bool: False when the agent's parameters or losses became NaN/inf (diverged)."""
+    metrics: dict
+    """name -> (A, n_iterations) PPO diagnostics."""
+    compile_s: float
+    train_s: float
+
+    @staticmethod
+    def from_iterations(config, population, finished, metrics, finite, n_envs, compile_s, train_s) -> "Results":
+        """Assembles per-iteration logs: ``finished`` is a list of (returns, lengths), each (A, n_steps, n_envs)."""
+        per_iter = config.ppo.buffer_size
+        episodes = []
+        for i in range(population.size):
+            ts, rets, lens = [], [], []
+            for it, (ret, length) in enumerate(finished):
+                steps, envs_ = np.nonzero(length[i] > 0)
+                ts.append(it * per_iter + steps * n_envs + envs_ + 1)
+                rets.append(ret[i][steps, envs_])
+                lens.append(length[i][steps, envs_])
+            episodes.append(Episodes(np.concatenate(ts).astype(np.int64), np.concatenate(rets).astype(np.float64),
+                                     np.concatenate(lens).astype(np.int64)))
+        stacked = {k: np.stack([m[k] for m in metrics], axis=1) for k in (metrics[0] if metrics else {})}
+        return Results(
+            env_id=config.env_id, total_timesteps=len(finished) * per_iter, timesteps_per_iteration=per_iter,
+            seeds=np.asarray(population.seeds), phi={f: np.asarray(v) for f, v in population.phi._asdict().items()},
+            learning_rate=np.asarray(population.learning_rate), episodes=episodes, finite=np.asarray(finite),
+            metrics=stacked, compile_s=compile_s, train_s=train_s,
+        )
+
+    @property
+    def size(self) -> int:
+        return len(self.seeds)
+
+    def fitness(self) -> np.ndarray:
+        """(A,) per-agent fitness; NaN for an agent that diverged or finished no episode."""
+        out = np.array([fitness(e) for e in self.episodes])
+        out[~self.finite] = np.nan
+        return out
+
+    def curves(self, window: int = CURVE_WINDOW) -> tuple[np.ndarray, np.ndarray]:
+        """Learning curves on the update grid: (timesteps (I,), values (A, I)).
+
+        values[a, i] is the mean return of agent a's last ``window`` episodes completed by timesteps[i]
+        (NaN before its first episode), as SB3 logs ``rollout/ep_rew_mean``.
+        """
+        n_iter = self.total_timesteps // self.timesteps_per_iteration
+        grid = (np.arange(n_iter) + 1) * self.timesteps_per_iteration
+        values = np.full((self.size, n_iter), np.nan)
+        for a, ep in enumerate(self.episodes):
+            done_by = np.searchsorted(ep.timestep, grid, side="right")
+            csum = np.concatenate([[0.0], np.cumsum(ep.ret)])
+            lo = np.maximum(done_by - window, 0)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                values[a] = np.where(done_by > 0, (csum[done_by] - csum[lo]) / (done_by - lo), np.nan)
+        return grid, values
+
+    def agent_steps_per_s(self) -> float:
+        return self.size * self.total_timesteps / self.train_s if self.train_s > 0 else float("nan")
+
+    # -- files -----------------------------------------------------------------------------------------
+    def write_csv(self, path: Path, label: str = "") -> None:
+        """One row per completed episode: model, agent, seed, timestep, return, length."""
+        with open(path, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["model", "agent", "seed", "timestep", "return", "length"])
+            for a, ep in enumerate(self.episodes):
+                for t, r, n in zip(ep.timestep, ep.ret, ep.length):
+                    w.writerow([label, a, int(self.seeds[a]), int(t), f"{r:.6g}", int(n)])
+
+    def summary(self) -> dict:
+        """JSON-ready per-agent fitness and timing."""
+        fit = self.fitness()
+        return {
+            "env_id": self.env_id,
+            "total_timesteps": self.total_timesteps,
+            "seeds": self.seeds.tolist(),
+            "fitness": [None if np.isnan(v) else float(v) for v in fit],
+            "mean_fitness": None if np.all(np.isnan(fit)) else float(np.nanmean(fit)),
+            "episodes": [len(e.ret) for e in self.episodes],
+            "diverged": (~self.finite).tolist(),
+            "compile_s": self.compile_s,
+            "train_s": self.train_s,
+            "agent_steps_per_s": self.agent_steps_per_s(),
+        }
+
+    def write_summary(self, path: Path) -> None:
+        Path(path).write_text(json.dumps(self.summary(), indent=2))

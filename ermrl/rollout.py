@@ -1,0 +1,106 @@
+"""One agent's rollout on the JAX backend: n_steps of acting, stepping and feeding the reservoirs.
+
+Semantics follow stable-baselines3's ``collect_rollouts`` with the reference's reservoir wrapper:
+- Box actions are sampled unclipped, clipped to the bounds for the env, and stored unclipped for the loss;
+- on a time-limit truncation the reward gets ``γ·V(c_final)``, the value of the context built from the
+  episode's final observation (SB3's ``TimeLimit.truncated`` bootstrap);
+- at an episode's end the reservoir state is reset and fed (o_0, zeros, 0).
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from ermrl.agent import Agent, Reservoirs
+from ermrl.envs.jax_backend import JaxEnv
+from ermrl.ppo.networks import ActorCritic, PolicyParams
+
+
+class EnvCarry(NamedTuple):
+    """Per-env state carried between steps; every field has a leading (n_envs,) axis."""
+
+    env_state: Any
+    res_state: jax.Array | None
+    """(n_envs, K, N) reservoir states; None with no reservoir."""
+    context: jax.Array
+    """(n_envs, context_dim) what the policy sees now."""
+    episode_return: jax.Array
+    """(n_envs,) undiscounted return of the running episode."""
+    episode_length: jax.Array
+    """(n_envs,) int32 steps of the running episode."""
+
+
+class Step(NamedTuple):
+    """One rollout step, each field (n_envs, ...); ``scan`` stacks them to (n_steps, n_envs, ...)."""
+
+    context: jax.Array
+    action: jax.Array
+    log_prob: jax.Array
+    value: jax.Array
+    reward: jax.Array
+    done: jax.Array
+    truncated: jax.Array
+    final_context: jax.Array
+    """Context built from the step's final observation (before any reset), for the truncation bootstrap."""
+    finished_return: jax.Array
+    """Return of the episode this step ended, NaN when it ended none."""
+    finished_length: jax.Array
+    """Length of the episode this step ended, 0 when it ended none."""
+
+
+def start(env: JaxEnv, agent: Agent, res: Reservoirs, key: jax.Array, n_envs: int) -> EnvCarry:
+    """Resets n_envs envs and their reservoirs."""
+    obs, env_state = jax.vmap(env.reset)(jax.random.split(key, n_envs))
+    res_state, context = jax.vmap(agent.start_episode, in_axes=(None, 0))(res, obs)
+    zeros = jnp.zeros((n_envs,), jnp.float32)
+    return EnvCarry(env_state, res_state, context, zeros, jnp.zeros((n_envs,), jnp.int32))
+
+
+def collect(
+    env: JaxEnv, agent: Agent, net: ActorCritic, params: PolicyParams, res: Reservoirs, carry: EnvCarry,
+    key: jax.Array, n_steps: int,
+) -> tuple[EnvCarry, Step]:
+    """Runs n_steps steps in each env. Returns the final carry and the stacked steps (n_steps, n_envs, ...)."""
+    action_space = env.info.action
+    n_envs = carry.context.shape[0]
+
+    def body(carry: EnvCarry, step_key):
+        k_act, k_env = jax.random.split(step_key)
+        head = net.head(params, carry.context)
+        value = net.value(params, carry.context)
+        action = net.sample(params, head, k_act)
+        log_prob = net.log_prob(params, head, action)
+        if action_space.discrete:
+            env_action = action
+        else:
+            env_action = jnp.clip(action, jnp.asarray(action_space.low), jnp.asarray(action_space.high))
+        tr = jax.vmap(env.step)(jax.random.split(k_env, n_envs), carry.env_state, env_action)
+
+        action_enc = jax.vmap(agent.encode_action)(env_action)
+        observe = jax.vmap(agent.observe, in_axes=(None, 0, 0, 0, 0))
+        res_final, final_context = observe(res, carry.res_state, tr.final_obs, action_enc, tr.reward)
+        res_start, start_context = jax.vmap(agent.start_episode, in_axes=(None, 0))(res, tr.obs)
+
+        done = jnp.logical_or(tr.terminated, tr.truncated)
+        pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(done.reshape((-1,) + (1,) * (x.ndim - 1)), x, y), a, b)
+        episode_return = carry.episode_return + tr.reward
+        episode_length = carry.episode_length + 1
+        step = Step(
+            context=carry.context, action=action, log_prob=log_prob, value=value, reward=tr.reward,
+            done=done, truncated=tr.truncated, final_context=final_context,
+            finished_return=jnp.where(done, episode_return, jnp.nan),
+            finished_length=jnp.where(done, episode_length, 0),
+        )
+        carry = EnvCarry(
+            env_state=tr.state,
+            res_state=pick(res_start, res_final),
+            context=pick(start_context, final_context),
+            episode_return=jnp.where(done, 0.0, episode_return),
+            episode_length=jnp.where(done, 0, episode_length),
+        )
+        return carry, step
+
+    return jax.lax.scan(body, carry, jax.random.split(key, n_steps))
