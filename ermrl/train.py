@@ -160,10 +160,7 @@ class Trainer:
         self.sharding = NamedSharding(self.mesh, PartitionSpec("agents"))
         spec = PartitionSpec("agents")
         shard = lambda f: jax.shard_map(jax.vmap(f), mesh=self.mesh, in_specs=spec, out_specs=spec, check_vma=False)
-        # Initialization runs on one device and is then resharded: XLA:CPU deadlocked when several host
-        # devices ran the batched QR of the orthogonal init at once (jax 0.10).
-        self._init = jax.jit(jax.vmap(init))
-        self._reshard = jax.jit(lambda tree: tree, out_shardings=self.sharding)
+        self._init = jax.jit(shard(init))
         self._iteration = jax.jit(shard(iteration), donate_argnums=0)
         self.n_iterations = config.ppo.iterations(config.total_timesteps)
 
@@ -183,9 +180,7 @@ class Trainer:
             phi,
             _pad(np.asarray(population.learning_rate, np.float32), size),
         )
-        with jax.default_device(self.devices[0]):
-            state = self._init(*args)
-        return self._reshard(state)
+        return self._init(*jax.device_put(args, self.sharding))
 
     def run(self, population: Population, progress_fn: Callable[[Progress], None] | None = None) -> Results:
         """Trains every agent of ``population`` for ``total_timesteps``; returns curves and fitness."""

@@ -16,6 +16,26 @@ import numpy as np
 from ermrl.envs.spaces import ActionSpace
 
 
+def orthogonal(gain: float, iterations: int = 60):
+    """Orthogonal initializer (as torch's ``orthogonal_``, which SB3 uses) without a LAPACK call.
+
+    It returns gain × the orthogonal polar factor of a Gaussian matrix, found by Newton–Schulz iteration. For a
+    Gaussian matrix that factor is Haar-distributed, like the sign-corrected QR factor, so the distribution is
+    the same. We avoid ``jnp.linalg.qr``: on XLA:CPU, batched QRs running at once deadlocked the thread pool.
+    """
+
+    def init(key, shape, dtype=jnp.float32):
+        a = jax.random.normal(key, shape, jnp.float32)
+        x = a / jnp.linalg.norm(a)  # every singular value now <= 1, where the iteration converges
+
+        def body(_, x):
+            return 1.5 * x - 0.5 * x @ (x.T @ x)
+
+        return (gain * jax.lax.fori_loop(0, iterations, body, x)).astype(dtype)
+
+    return init
+
+
 class MLP(nn.Module):
     """tanh MLP with orthogonal init; the last layer is linear with gain ``head_gain``."""
 
@@ -26,9 +46,9 @@ class MLP(nn.Module):
     @nn.compact
     def __call__(self, x):
         for width in self.hidden:
-            x = nn.Dense(width, kernel_init=nn.initializers.orthogonal(np.sqrt(2)), bias_init=nn.initializers.zeros)(x)
+            x = nn.Dense(width, kernel_init=orthogonal(np.sqrt(2)), bias_init=nn.initializers.zeros)(x)
             x = jnp.tanh(x)
-        return nn.Dense(self.out, kernel_init=nn.initializers.orthogonal(self.head_gain), bias_init=nn.initializers.zeros)(x)
+        return nn.Dense(self.out, kernel_init=orthogonal(self.head_gain), bias_init=nn.initializers.zeros)(x)
 
 
 class PolicyParams(NamedTuple):

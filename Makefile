@@ -1,0 +1,44 @@
+# Quick start: `make demo` (install + the main job) and `make test` (install + the default test suite).
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+PIP := $(BIN)/python -m pip --disable-pip-version-check -q
+
+.PHONY: demo test test-slow parity reference bench clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(PIP) install -U pip
+
+# One stamp per set of extras, so that `make test` after `make demo` only adds what is missing.
+$(VENV)/.installed-base: pyproject.toml | $(BIN)/python
+	$(PIP) install -e .
+	touch $@
+
+$(VENV)/.installed-test: pyproject.toml | $(BIN)/python
+	$(PIP) install -e '.[test]'
+	touch $@
+
+# torch first, pinned, so that pip takes the CPU wheel instead of a multi-GB CUDA build.
+$(VENV)/.installed-reference: pyproject.toml | $(BIN)/python
+	$(PIP) install torch==2.13.0
+	$(PIP) install -e '.[test,reference]'
+	touch $@
+
+demo: $(VENV)/.installed-base
+	$(BIN)/ermrl train --env CartPoleNoVel-v1 --seeds 3 --timesteps 300000 --out runs/demo
+
+test: $(VENV)/.installed-test
+	$(BIN)/python -m pytest -q
+
+# Long learning runs (full-size budgets); minutes each.
+test-slow: $(VENV)/.installed-test
+	$(BIN)/python -m pytest -q -m slow
+
+reference: $(VENV)/.installed-reference
+
+bench: $(VENV)/.installed-test
+	$(BIN)/python benchmarks/throughput.py
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

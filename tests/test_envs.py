@@ -1,0 +1,70 @@
+import gymnasium as gym
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from ermrl import envs
+from ermrl.envs import masking
+from ermrl.errors import ConfigError
+
+
+@pytest.mark.parametrize("env_id, kept", [("CartPoleNoVel-v1", [0, 2]), ("PendulumNoVel-v1", [0, 1])])
+def test_novel_deletes_exactly_the_velocity_dims(env_id, kept):
+    base, _ = masking.parse(env_id)
+    full, masked = envs.make(base), envs.make(env_id)
+    key = jax.random.PRNGKey(4)
+    obs_full, state = full.reset(key)
+    obs_masked, _ = masked.reset(key)
+    np.testing.assert_array_equal(obs_masked, obs_full[np.array(kept)])
+    action = jnp.array(1) if full.info.action.discrete else jnp.array([0.3])
+    step_full = full.step(key, state, action)
+    step_masked = masked.step(key, state, action)
+    np.testing.assert_array_equal(step_masked.obs, step_full.obs[np.array(kept)])
+    assert masked.info.obs_dim == len(kept)
+
+
+def test_registry_ids_and_errors():
+    assert masking.novel_id("CartPole-v1") == "CartPoleNoVel-v1"
+    assert masking.parse("LunarLanderNoVel-v3") == ("LunarLander-v3", (2, 3, 5))
+    with pytest.raises(ConfigError, match=r"^no velocity mask is known for 'Acrobot-v1' \(from 'AcrobotNoVel-v1'\)"):
+        envs.describe("AcrobotNoVel-v1")
+    with pytest.raises(ConfigError, match=r"^unknown env id 'Nope-v0'; the JAX backend runs: Acrobot-v1, CartPole-v1"):
+        envs.describe("Nope-v0")
+    with pytest.raises(ConfigError, match="unknown backend 'gpu'"):
+        envs.describe("CartPole-v1", backend="gpu")
+
+
+def _gymnasium_state(env_id, jax_state):
+    if env_id == "CartPole-v1":
+        return np.array([jax_state.x, jax_state.x_dot, jax_state.theta, jax_state.theta_dot], np.float64)
+    return np.array([jax_state.theta, jax_state.theta_dot], np.float64)
+
+
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "Pendulum-v1"])
+def test_jax_dynamics_match_gymnasium(env_id):
+    """Same start state and actions: observations, rewards and episode ends agree with Gymnasium's."""
+    env = envs.make(env_id)
+    ref = gym.make(env_id)
+    rng = np.random.default_rng(0)
+    key = jax.random.PRNGKey(0)
+    obs, state = env.reset(key)
+    ref.reset(seed=0)
+    ref.unwrapped.state = _gymnasium_state(env_id, state)
+    step = jax.jit(env.step)
+    for t in range(300):
+        if env.info.action.discrete:
+            a = int(rng.integers(2))
+            jax_a = jnp.array(a)
+        else:
+            a = rng.uniform(-2, 2, size=(1,)).astype(np.float32)
+            jax_a = jnp.asarray(a)
+        ref_obs, ref_r, term, trunc, _ = ref.step(a)
+        tr = step(jax.random.PRNGKey(t), state, jax_a)
+        np.testing.assert_allclose(tr.final_obs, ref_obs, rtol=1e-4, atol=1e-4)
+        assert float(tr.reward) == pytest.approx(ref_r, rel=1e-4, abs=1e-4)
+        assert bool(tr.terminated) == term and bool(tr.truncated) == (trunc and not term)
+        if term or trunc:
+            break
+        state = tr.state
+    assert t > 5
