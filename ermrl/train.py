@@ -182,6 +182,10 @@ class Trainer:
         )
         return self._init(*jax.device_put(args, self.sharding))
 
+    def step(self, state: AgentState) -> tuple[AgentState, IterationLog]:
+        """One rollout + PPO update for every agent (donates ``state``)."""
+        return self._iteration(state)
+
     def run(self, population: Population, progress_fn: Callable[[Progress], None] | None = None) -> Results:
         """Trains every agent of ``population`` for ``total_timesteps``; returns curves and fitness."""
         ppo = self.config.ppo

@@ -42,7 +42,7 @@ def update(learner: LearnerState, batch: Batch, key: jax.Array, net: ActorCritic
         (_, metrics), grads = grad_fn(learner.params, net, mb, config)
         updates, opt_state = optimizer.update(grads, learner.opt_state, learner.params)
         params = jax.tree.map(lambda p, u: p - learner.learning_rate * u, learner.params, updates)
-        metrics["grad_norm"] = optax.global_norm(grads)
+        metrics["grad_norm"] = optax.tree.norm(grads)
         return LearnerState(params, opt_state, learner.learning_rate), metrics
 
     def epoch(learner: LearnerState, epoch_key: jax.Array):

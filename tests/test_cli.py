@@ -1,0 +1,53 @@
+"""The CLI as a user runs it: subprocesses at a tiny budget, help texts and one-line errors with exit code 2."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+
+def ermrl(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd, timeout=600)
+
+
+def test_train_writes_a_run_folder(tmp_path):
+    out = tmp_path / "run"
+    r = ermrl("train", "--env", "CartPoleNoVel-v1", "--seeds", "2", "--timesteps", "2048", "--out", str(out), "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "seed 0: fitness" in r.stdout and "seed 1: fitness" in r.stdout
+    for name in ("config.json", "episodes.csv", "curves.csv", "summary.json", "learning_curve.png"):
+        assert (out / name).stat().st_size > 0, name
+    config = json.loads((out / "config.json").read_text())
+    assert config["train"]["env_id"] == "CartPoleNoVel-v1" and config["population"]["seeds"] == [0, 1]
+    assert config["train"]["ppo"]["n_steps"] == 2048
+    assert config["population"]["phi"]["sr"] == [[pytest.approx(0.95)], [pytest.approx(0.95)]]
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["fitness"]) == 2 and summary["episodes"][0] > 10
+    assert (out / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_help_explains_every_flag():
+    top = ermrl("--help")
+    assert top.returncode == 0 and "train" in top.stdout
+    sub = ermrl("train", "--help")
+    assert sub.returncode == 0
+    for flag in ("--env", "--units", "--sr", "--lr", "--iss", "--seeds", "--timesteps", "--no-reservoir", "--ppo-lr",
+                 "--out", "--reservoirs", "--feed-action", "--skip-connection", "--observed-units", "--bias", "--preset"):
+        assert flag in sub.stdout, flag
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--env", "Nope-v0"], "ermrl train: error: unknown env id 'Nope-v0'; the JAX backend runs:"),
+    (["--env", "AcrobotNoVel-v1"], "ermrl train: error: no velocity mask is known for 'Acrobot-v1'"),
+    (["--lr", "1.5"], "ermrl train: error: --lr (leak rate) must be in (0, 1], got [1.5]"),
+    (["--sr", "-1"], "ermrl train: error: --sr must be positive and finite, got [-1.0]"),
+    (["--reservoirs", "2", "--sr", "1", "2", "3"], "ermrl train: error: --sr got 3 values for 2 reservoirs; give one value or 2"),
+    (["--ppo-lr", "3"], "ermrl train: error: learning rate 3.0 is outside (0, 1)"),
+])
+def test_bad_input_is_one_line_and_exit_code_2(args, message, tmp_path):
+    r = ermrl("train", *args, "--timesteps", "2048", cwd=tmp_path)
+    assert r.returncode == 2
+    assert r.stderr.startswith(message), r.stderr
+    assert r.stderr.count("\n") == 1
+    assert not (tmp_path / "runs").exists()  # nothing written
