@@ -113,21 +113,24 @@ class Agent:
             return jax.nn.one_hot(env_action, self.env.action.dim, dtype=jnp.float32)
         return env_action.astype(jnp.float32).reshape(self.env.action.dim)
 
-    def observe(self, res: Reservoirs, state: jax.Array, obs, action_enc, reward):
+    def observe(self, res: Reservoirs, state: jax.Array | None, obs, action_enc, reward):
         """Feeds u = (obs, action_enc, reward) to the reservoirs.
 
-        state: (K, N), or None with no reservoir. Returns (new state, context (context_dim,)).
+        state: (K, N), or None for a reset (zero) state or with no reservoir.
+        Returns (new state (K, N) or None, context (context_dim,)).
         """
         if self.config.reservoirs == 0:
             return None, obs
         u = jnp.concatenate([obs, action_enc, jnp.reshape(reward, (1,)).astype(jnp.float32)])
-        state = jax.vmap(reservoir.step, in_axes=(0, 0, 0, None))(res.weights, res.leak, state, u)
+        if state is None:
+            state = jax.vmap(reservoir.first_step, in_axes=(0, 0, None))(res.weights, res.leak, u)
+        else:
+            state = jax.vmap(reservoir.step, in_axes=(0, 0, 0, None))(res.weights, res.leak, state, u)
         context = state[:, : self.config.units_seen].reshape(-1)
         if self.config.skip_connection:
             context = jnp.concatenate([context, u])
         return state, context
 
     def start_episode(self, res: Reservoirs, obs: jax.Array):
-        """Reset state, then feed (o_0, zeros, 0). Returns (state (K, N), context)."""
-        state = None if res is None else jnp.zeros((self.config.reservoirs, self.config.spec.units), jnp.float32)
-        return self.observe(res, state, obs, self._constant_action(), jnp.float32(0.0))
+        """Reset the state to zeros, then feed (o_0, zeros, 0). Returns (state (K, N), context)."""
+        return self.observe(res, None, obs, self._constant_action(), jnp.float32(0.0))

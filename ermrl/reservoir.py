@@ -103,6 +103,11 @@ def step(weights: ReservoirWeights, lr: jax.Array, x: jax.Array, u: jax.Array) -
     return (1.0 - lr) * x + lr * jnp.tanh(pre)
 
 
+def first_step(weights: ReservoirWeights, lr: jax.Array, u: jax.Array) -> jax.Array:
+    """:func:`step` from the zero state, without the (then useless) W x product. Returns (units,)."""
+    return lr * jnp.tanh(weights.Win @ u + weights.bias)
+
+
 def run(weights: ReservoirWeights, lr: jax.Array, inputs: jax.Array, x0: jax.Array | None = None) -> jax.Array:
     """Runs a reservoir over a sequence. inputs: (T, input_dim). Returns the states (T, units)."""
     x = jnp.zeros(weights.W.shape[0], inputs.dtype) if x0 is None else x0
