@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ermrl.agent import AgentConfig, Phi
-from ermrl.ppo.config import SB3_DEFAULTS
+from ermrl.ppo.config import PPOConfig, SB3_DEFAULTS
 from ermrl.train import Population, TrainConfig, Trainer, train
 
 
@@ -70,3 +70,19 @@ def test_masked_cartpole_needs_the_reservoir():
     _, curves = ermrl.curves()
     mean = np.nanmean(curves, axis=0)
     assert mean[-1] > 2 * mean[5]  # the curve rises
+
+
+def test_box_actions_and_time_limit_truncation_on_pendulum():
+    res = train(config("PendulumNoVel-v1", timesteps=2048), Population.grid(Phi(0.9, 0.3, 1.0), 2, 3e-4, 1))
+    for ep in res.episodes:
+        assert ep.length.tolist() == [200] * 10  # every Pendulum episode is cut by its time limit
+        assert np.all(ep.ret < 0) and np.all(ep.ret > -16.3 * 200)  # reward is in [-16.27, 0] per step
+    assert np.all(res.finite) and np.isfinite(res.metrics["value_loss"]).all()
+
+
+def test_several_envs_per_agent():
+    cfg = dataclasses.replace(config("CartPole-v1", timesteps=4096, reservoirs=0), ppo=PPOConfig(n_envs=4, n_steps=256, batch_size=256, n_epochs=4))
+    res = train(cfg, Population.grid(Phi(1.0, 1.0, 1.0), 1, 3e-4, 0))
+    ep = res.episodes[0]
+    assert res.total_timesteps == 4096 and ep.length.sum() <= 4096
+    np.testing.assert_array_equal(ep.ret, ep.length)
