@@ -19,10 +19,13 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 	$(PIP) install -e '.[test]'
 	touch $@
 
+# The reference pipeline (SB3 + ReservoirPy) lives in its own venv so that the default one never holds torch.
 # torch first, pinned, so that pip takes the CPU wheel instead of a multi-GB CUDA build.
-$(VENV)/.installed-reference: pyproject.toml | $(BIN)/python
-	$(PIP) install torch==2.13.0
-	$(PIP) install -e '.[test,reference]'
+REF_VENV ?= .venv-ref
+$(REF_VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(REF_VENV)
+	$(REF_VENV)/bin/python -m pip --disable-pip-version-check -q install torch==2.13.0
+	$(REF_VENV)/bin/python -m pip --disable-pip-version-check -q install -e '.[test,reference,mujoco]'
 	touch $@
 
 demo: $(VENV)/.installed-base
@@ -35,10 +38,10 @@ test: $(VENV)/.installed-test
 test-slow: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -q -m slow
 
-reference: $(VENV)/.installed-reference
+reference: $(REF_VENV)/.installed
 
-bench: $(VENV)/.installed-test
-	$(BIN)/python benchmarks/throughput.py
+bench: $(VENV)/.installed-test $(REF_VENV)/.installed
+	$(BIN)/python benchmarks/throughput.py --repeats 3 --reference-python $(REF_VENV)/bin/python
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

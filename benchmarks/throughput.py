@@ -101,7 +101,7 @@ def main(argv=None) -> int:
     result = {"jax": rows}
     if not a.no_reference:
         if not Path(a.reference_python).exists():
-            print(f"reference skipped: {a.reference_python} not found (run `make reference-venv`)", file=sys.stderr)
+            print(f"reference skipped: {a.reference_python} not found (run `make reference`)", file=sys.stderr)
         else:
             ref = run_reference(a.reference_python, a.env, a.reference_agents, a.reference_timesteps)
             result["reference"] = ref
