@@ -163,6 +163,7 @@ class Trainer:
         self._init = jax.jit(shard(init))
         self._iteration = jax.jit(shard(iteration), donate_argnums=0)
         self.n_iterations = config.ppo.iterations(config.total_timesteps)
+        self._compiled: dict[int, jax.stages.Compiled] = {}
 
     def _padded_size(self, n: int) -> int:
         d = len(self.devices)
@@ -192,7 +193,10 @@ class Trainer:
         n = population.size
         t0 = time.perf_counter()
         state = self.init(population)
-        compiled = self._iteration.lower(state).compile()
+        size = self._padded_size(n)
+        if size not in self._compiled:  # one compile per padded population size, reused by later runs
+            self._compiled[size] = self._iteration.lower(state).compile()
+        compiled = self._compiled[size]
         compile_s = time.perf_counter() - t0
         steps_per_iter = ppo.buffer_size
         finished: list[tuple[np.ndarray, np.ndarray]] = []

@@ -21,6 +21,7 @@ def test_same_seeds_give_identical_fitness():
     pop = Population.grid([Phi(0.95, 0.5, 1.0), Phi(2.0, 0.1, 0.5)], 2, 3e-4, 1)
     trainer = Trainer(cfg)
     a, b = trainer.run(pop), trainer.run(pop)
+    assert len(trainer._compiled) == 1  # the second run reuses the compiled program
     assert np.all(np.isfinite(a.fitness()))
     np.testing.assert_array_equal(a.fitness(), b.fitness())
     for ea, eb in zip(a.episodes, b.episodes):
