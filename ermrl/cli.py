@@ -101,16 +101,176 @@ def _check_phi(phi) -> None:
         raise ConfigError(f"--lr (leak rate) must be in (0, 1], got {phi.lr.tolist()}")
 
 
+def _add_evolve(sub) -> None:
+    p = sub.add_parser(
+        "evolve", help="evolve reservoir hyperparameters Φ with CMA-ES (the outer loop)",
+        description="Evolve Φ = (sr, lr, iss) with Optuna. Each generation (popsize trials × seeds) trains as one "
+                    "population. Rerunning the same command resumes the study: completed trials count toward "
+                    "--trials and a generation cut off mid-way is redone.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("--env", default="CartPoleNoVel-v1", help="env id")
+    p.add_argument("--trials", type=int, default=900, help="completed trials to reach")
+    p.add_argument("--seeds", type=int, default=3, help="seeds per trial; fitness is their mean")
+    p.add_argument("--timesteps", type=int, default=300_000, help="env steps per agent")
+    p.add_argument("--reservoirs", type=int, default=1, help="number of reservoirs K, each with its own Φ")
+    p.add_argument("--units", type=int, default=100, help="neurons per reservoir")
+    p.add_argument("--fixed-iss", type=float, default=None, help="hold the input scaling fixed (e.g. 1.0) instead of searching it")
+    p.add_argument("--sampler", default="cmaes", help="cmaes (Optuna's CmaEsSampler), random or tpe")
+    p.add_argument("--popsize", type=int, default=None, help="trials per generation (default: CMA-ES's 4 + 3 ln n)")
+    p.add_argument("--sampler-seed", type=int, default=0, help="seed of the sampler")
+    for hp, lo, hi in (("sr", 1e-4, 1e2), ("lr", 1e-2, 1.0), ("iss", 0.1, 10.0)):
+        p.add_argument(f"--min-{hp}", type=float, default=lo, help=f"lower log-uniform bound of {hp}")
+        p.add_argument(f"--max-{hp}", type=float, default=hi, help=f"upper log-uniform bound of {hp}")
+    p.add_argument("--ppo-lr", type=float, default=None, help="PPO learning rate (default 3e-4, as in the paper's evolution)")
+    p.add_argument("--feed-action", choices=["previous", "none"], default="previous",
+                   help="'none' reproduces the reference code, which never fed the previous action")
+    p.add_argument("--study", default=None, help="study name (default ENV-Kres-STEPSk)")
+    p.add_argument("--storage", default=None, help="Optuna storage URL or journal file (default sqlite in the run folder)")
+    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/STUDY)")
+    p.add_argument("--no-estimate", action="store_true", help="skip the warm-up that estimates the total time")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def _add_test(sub) -> None:
+    p = sub.add_parser(
+        "test", help="test phase: train the best Φ on new seeds against PPO baselines",
+        description="Train Φ* (the study's best trial) on new seeds, plus vanilla PPO on the same observation and PPO "
+                    "with full observations; write curves (CSV), a summary table and the paper-style figure.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    _study_args(p)
+    p.add_argument("--seeds", type=int, default=10, help="new seeds per model")
+    p.add_argument("--timesteps", type=int, default=1_000_000, help="env steps per agent (paper: 1M, LunarLander 3M)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _add_report(sub) -> None:
+    p = sub.add_parser("report", help="write a self-contained HTML report of a study",
+                       description="Write report.html (images embedded) with the study config, fitness over trials, "
+                                   "the HP map, the best Φ and the test phase if one was run; plots also as PNG.",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    _study_args(p)
+
+
+def _study_args(p) -> None:
+    p.add_argument("--study", required=True, help="study name, as given to or printed by `ermrl evolve`")
+    p.add_argument("--storage", default=None, help="storage URL (default sqlite in runs/STUDY)")
+    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/STUDY)")
+
+
+def _run_dir(args) -> Path:
+    return args.out or Path("runs") / args.study
+
+
+def cmd_evolve(args) -> int:
+    import dataclasses
+
+    import optuna
+
+    from ermrl import envs
+    from ermrl.agent import AgentConfig
+    from ermrl.evolve import EvolveConfig, estimate_seconds, evolve
+    from ermrl.ppo.config import SB3_DEFAULTS
+    from ermrl.progress import EvolutionBar
+    from ermrl.reservoir import ReservoirSpec
+    from ermrl.search_space import SearchSpace
+    from ermrl.study import SAMPLERS, default_storage, make_sampler, open_study
+    from ermrl.train import TrainConfig, Trainer
+
+    if args.sampler not in SAMPLERS:
+        raise ConfigError(f"unknown sampler {args.sampler!r}; choose one of {', '.join(SAMPLERS)}")
+    envs.describe(args.env)
+    for name in ("trials", "seeds"):
+        if getattr(args, name) < 1:
+            raise ConfigError(f"--{name} must be >= 1, got {getattr(args, name)}")
+    space = SearchSpace(args.reservoirs, (args.min_sr, args.max_sr), (args.min_lr, args.max_lr),
+                        (args.min_iss, args.max_iss), args.fixed_iss)
+    ppo = SB3_DEFAULTS if args.ppo_lr is None else dataclasses.replace(SB3_DEFAULTS, learning_rate=args.ppo_lr)
+    agent = AgentConfig(reservoirs=args.reservoirs, spec=ReservoirSpec(units=args.units), feed_action=args.feed_action)
+    config = EvolveConfig(train=TrainConfig(args.env, args.timesteps, agent, ppo), space=space, trials=args.trials,
+                          seeds=args.seeds, sampler=args.sampler, popsize=args.popsize, sampler_seed=args.sampler_seed)
+    name = args.study or f"{args.env}-{args.reservoirs}res-{args.timesteps // 1000}k"
+    run_dir = args.out or Path("runs") / name
+    storage = args.storage or default_storage(run_dir)
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = open_study(storage, name, make_sampler(args.sampler, config.generation_size, args.sampler_seed), config.record())
+    from optuna.trial import TrialState
+
+    done = sum(t.state == TrialState.COMPLETE for t in study.trials)
+    print(f"study {name!r} in {storage}: {done}/{args.trials} trials done, {config.generation_size} per generation "
+          f"× {args.seeds} seeds × {args.timesteps:,} steps")
+    trainer = Trainer(config.train)
+    if done < args.trials and not args.no_estimate:
+        eta = estimate_seconds(trainer, config, args.trials - done)
+        print(f"estimated time: {eta / 60:.1f} min ({-(-(args.trials - done) // config.generation_size)} generations, "
+              "from one measured iteration)")
+    with EvolutionBar(args.trials, config.generation_size, enabled=not args.quiet) as bar:
+        evolve(study, config, trainer, bar.update)
+    best = study.best_trial
+    print(f"best fitness {best.value:.2f} at trial {best.number}: "
+          + ", ".join(f"{k} {v:.4g}" for k, v in best.params.items()))
+    print(f"next: ermrl test --study {name}{_storage_flag(args)} ; ermrl report --study {name}{_storage_flag(args)}")
+    return 0
+
+
+def _storage_flag(args) -> str:
+    out = f" --storage {args.storage}" if args.storage else ""
+    return out + (f" --out {args.out}" if args.out else "")
+
+
+def cmd_test(args) -> int:
+    from ermrl.experiments.test_phase import run_test_phase
+    from ermrl.progress import TrainingBar
+    from ermrl.study import default_storage, load_study
+
+    if args.seeds < 1:
+        raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
+    run_dir = _run_dir(args)
+    study = load_study(args.storage or default_storage(run_dir), args.study)
+    bars = []
+
+    def progress(label):
+        bar = TrainingBar(f"{label}", enabled=not args.quiet)
+        bar.__enter__()
+        bars.append(bar)
+        return bar.update
+
+    try:
+        rows = run_test_phase(study, run_dir / "test", args.seeds, args.timesteps, progress)
+    finally:
+        for bar in bars:
+            bar.__exit__(None, None, None)
+    for r in rows:
+        print(f"{r['model']:<40} final {r['final_mean']:8.1f} ± {r['final_std']:6.1f}   AUC {r['auc_mean']:8.1f} ± {r['auc_std']:6.1f}")
+    print(f"wrote {run_dir / 'test'}/ (curves.csv, summary.json, summary.csv, test_phase.png, test_phase.svg)")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from ermrl.analysis.report import write_report
+    from ermrl.study import default_storage, load_study
+
+    run_dir = _run_dir(args)
+    study = load_study(args.storage or default_storage(run_dir), args.study)
+    path = write_report(study, run_dir)
+    print(f"report: {path.resolve()}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ermrl", description="Evolving Reservoirs for Meta Reinforcement Learning (ER-MRL), vectorized in JAX.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_train(sub)
+    _add_evolve(sub)
+    _add_test(sub)
+    _add_report(sub)
     return parser
 
 
-COMMANDS = {"train": cmd_train}
+COMMANDS = {"train": cmd_train, "evolve": cmd_evolve, "test": cmd_test, "report": cmd_report}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -36,3 +36,53 @@ class TrainingBar:
         self._bar.update(self._task, description=self.description, total=p.total_agent_steps,
                          completed=p.agent_steps, rate=f"{rate:,.0f} agent-steps/s",
                          steps=f"{p.agent_steps / 1e3:,.0f}k/{p.total_agent_steps / 1e3:,.0f}k steps")
+
+
+class EvolutionBar:
+    """``progress_fn`` for ``evolve``: generation, trials done of total, best fitness with its Φ,
+    agent-steps/s, and an ETA for the whole study."""
+
+    def __init__(self, total_trials: int, popsize: int, console: Console | None = None, enabled: bool = True):
+        self.console = console or Console(stderr=True)
+        self.total_trials, self.popsize = total_trials, popsize
+        self._bar = Progress(TextColumn("{task.description}"), BarColumn(bar_width=20), TextColumn("{task.fields[rate]}"),
+                             TextColumn("study ETA {task.fields[eta]}"), console=self.console, disable=not enabled)
+        self._task = None
+        self._gen_start: float | None = None
+        self._gen_seconds: list[float] = []
+
+    def __enter__(self):
+        self._bar.__enter__()
+        self._task = self._bar.add_task("starting", total=None, rate="", eta="?")
+        return self
+
+    def __exit__(self, *exc):
+        self._bar.__exit__(*exc)
+
+    def update(self, p) -> None:
+        import time
+
+        best = "none yet" if p.best_value is None else f"{p.best_value:.1f} (" + ", ".join(
+            f"{k} {v:.3g}" for k, v in p.best_params.items()) + ")"
+        desc = f"gen {p.generation} | {p.completed}/{p.trials} trials | best {best}"
+        if p.train is None:  # a generation was told
+            if self._gen_start is not None:
+                self._gen_seconds.append(time.perf_counter() - self._gen_start)
+            self._gen_start = None
+            self._bar.update(self._task, description=desc)
+            return
+        if self._gen_start is None:
+            self._gen_start = time.perf_counter() - p.train.elapsed_s - p.train.compile_s
+        rate = p.train.agent_steps / p.train.elapsed_s if p.train.elapsed_s > 0 else 0.0
+        gens_left = -(-(p.trials - p.completed) // self.popsize)
+        per_gen = (sum(self._gen_seconds) / len(self._gen_seconds)) if self._gen_seconds else \
+            p.train.elapsed_s * p.train.total_agent_steps / max(p.train.agent_steps, 1)
+        left_this = per_gen * (1 - p.train.agent_steps / p.train.total_agent_steps)
+        eta = left_this + per_gen * (gens_left - 1)
+        self._bar.update(self._task, description=desc, total=p.train.total_agent_steps, completed=p.train.agent_steps,
+                         rate=f"{rate:,.0f} agent-steps/s", eta=_hms(eta))
+
+
+def _hms(seconds: float) -> str:
+    seconds = max(0, int(seconds))
+    return f"{seconds // 3600}:{seconds % 3600 // 60:02d}:{seconds % 60:02d}"

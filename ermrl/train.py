@@ -183,6 +183,13 @@ class Trainer:
         )
         return self._init(*jax.device_put(args, self.sharding))
 
+    def compiled(self, state: AgentState):
+        """The iteration compiled for ``state``'s population size; one compile per size, reused by later runs."""
+        size = jax.tree.leaves(state)[0].shape[0]
+        if size not in self._compiled:
+            self._compiled[size] = self._iteration.lower(state).compile()
+        return self._compiled[size]
+
     def step(self, state: AgentState) -> tuple[AgentState, IterationLog]:
         """One rollout + PPO update for every agent (donates ``state``)."""
         return self._iteration(state)
@@ -193,10 +200,7 @@ class Trainer:
         n = population.size
         t0 = time.perf_counter()
         state = self.init(population)
-        size = self._padded_size(n)
-        if size not in self._compiled:  # one compile per padded population size, reused by later runs
-            self._compiled[size] = self._iteration.lower(state).compile()
-        compiled = self._compiled[size]
+        compiled = self.compiled(state)
         compile_s = time.perf_counter() - t0
         steps_per_iter = ppo.buffer_size
         finished: list[tuple[np.ndarray, np.ndarray]] = []

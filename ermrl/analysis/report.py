@@ -1,0 +1,250 @@
+"""Figures and a self-contained HTML report for an Optuna study written by ``ermrl evolve``.
+
+The study keeps its configuration in ``study.user_attrs["ermrl"]``; each completed trial has
+``value`` = fitness (mean over seeds) and user_attrs {"phi": {"sr"|"lr"|"iss": [K floats]},
+"seed_fitness": [S floats], "generation": int}; failed trials carry a "failure" reason instead.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import json
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import optuna  # noqa: E402
+from matplotlib.cm import ScalarMappable  # noqa: E402
+from matplotlib.colors import Normalize  # noqa: E402
+from optuna.study import StudyDirection  # noqa: E402
+from optuna.trial import FrozenTrial, TrialState  # noqa: E402
+
+from ermrl.analysis.plots import learning_curves  # noqa: E402
+
+MARKERS = ("o", "^", "s", "D", "v", "P", "*", "X")
+CSS = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;color:#222;line-height:1.4}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:left}
+th{background:#f3f3f3}td.n{text-align:right;font-family:monospace}img{max-width:100%}
+.warn{color:#a00}"""
+
+
+def _maximize(study: optuna.Study) -> bool:
+    return study.direction != StudyDirection.MINIMIZE
+
+
+def completed(study: optuna.Study) -> list[FrozenTrial]:
+    """Completed trials with a finite fitness, in trial-number order."""
+    return [t for t in study.trials
+            if t.state == TrialState.COMPLETE and t.value is not None and math.isfinite(t.value)]
+
+
+def failed(study: optuna.Study) -> list[FrozenTrial]:
+    return [t for t in study.trials if t.state == TrialState.FAIL]
+
+
+def ranked(study: optuna.Study) -> list[FrozenTrial]:
+    """Completed trials, best fitness first."""
+    return sorted(completed(study), key=lambda t: t.value, reverse=_maximize(study))
+
+
+def n_reservoirs(study: optuna.Study) -> int:
+    return int(study.user_attrs.get("ermrl", {}).get("reservoirs", 1))
+
+
+def phi(trial: FrozenTrial, k: int) -> dict[str, list[float]]:
+    """{"sr", "lr", "iss": K floats} from the trial's user_attrs, else from its params (iss may be missing)."""
+    if "phi" in trial.user_attrs:
+        return {name: [float(v) for v in vals] for name, vals in trial.user_attrs["phi"].items()}
+    out = {}
+    for name in ("sr", "lr", "iss"):
+        keys = [name] if k == 1 else [f"{name}_{i}" for i in range(1, k + 1)]
+        if all(key in trial.params for key in keys):
+            out[name] = [float(trial.params[key]) for key in keys]
+    return out
+
+
+def _save(fig, path: Path | str) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def fitness_over_trials(study: optuna.Study, path: Path | str) -> Path:
+    """Fitness of each completed trial by trial number, failed trials as red x at the bottom, best-so-far line."""
+    done, bad = completed(study), failed(study)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    if done:
+        x = np.array([t.number for t in done])
+        y = np.array([t.value for t in done])
+        acc = np.maximum.accumulate if _maximize(study) else np.minimum.accumulate
+        ax.scatter(x, y, s=14, alpha=0.7, label=f"completed ({len(done)})")
+        ax.step(x, acc(y), where="post", color="k", lw=1.5, label="best so far")
+        bottom = y.min() - 0.05 * max(np.ptp(y), 1e-9)
+    else:
+        bottom = 0.0
+        ax.text(0.5, 0.5, "no completed trial yet", transform=ax.transAxes, ha="center", va="center")
+    if bad:
+        ax.scatter([t.number for t in bad], [bottom] * len(bad), marker="x", color="red",
+                   label=f"failed ({len(bad)})")
+    ax.set_xlabel("trial")
+    ax.set_ylabel("fitness (mean over seeds)")
+    ax.set_title(f"{study.user_attrs.get('ermrl', {}).get('env_id', study.study_name)}: fitness over trials")
+    ax.grid(alpha=0.3)
+    if done or bad:
+        ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def hp_map(study: optuna.Study, path: Path | str, top: int = 30) -> Path:
+    """Spectral radius × leak rate (log-log) coloured by fitness; the ``top`` best trials drawn large, black-edged.
+
+    For K > 1 reservoirs, reservoir k's (sr_k, lr_k) of every trial is drawn with marker MARKERS[k].
+    """
+    k = n_reservoirs(study)
+    trials = ranked(study)
+    best = {t.number for t in trials[:top]}
+    fig, ax = plt.subplots(figsize=(6.5, 5))
+    if trials:
+        values = np.array([t.value for t in trials])
+        norm = Normalize(values.min(), values.max() if values.max() > values.min() else values.min() + 1)
+        for r in range(k):
+            pts = [(p["sr"][r], p["lr"][r], t.value, t.number in best) for t in trials
+                   if len((p := phi(t, k)).get("sr", [])) > r and len(p.get("lr", [])) > r]
+            if not pts:
+                continue
+            sr, lr, val, is_top = (np.array(c) for c in zip(*pts))
+            marker = MARKERS[r % len(MARKERS)]
+            for sel, size, edge in ((~is_top, 22, "none"), (is_top, 75, "k")):  # top trials drawn last, on top
+                ax.scatter(sr[sel], lr[sel], c=val[sel], cmap="viridis", norm=norm, s=size, marker=marker,
+                                edgecolors=edge, linewidths=0.9, alpha=0.85 if edge == "none" else 1.0)
+            if k > 1:
+                ax.scatter([], [], marker=marker, color="grey", label=f"reservoir {r + 1}")
+        ax.scatter([], [], marker="o", facecolors="none", edgecolors="k", s=75, label=f"top {min(top, len(trials))}")
+        fig.colorbar(ScalarMappable(norm=norm, cmap="viridis"), ax=ax, label="fitness")
+        ax.legend(fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "no completed trial yet", transform=ax.transAxes, ha="center", va="center")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    space = study.user_attrs.get("ermrl", {}).get("search_space", {})
+    for name, setter in (("sr", ax.set_xlim), ("lr", ax.set_ylim)):
+        if isinstance(space.get(name), (list, tuple)) and len(space[name]) == 2:
+            lo, hi = space[name]
+            setter(lo / 1.2, hi * 1.2)
+    ax.set_xlabel("spectral radius (sr)")
+    ax.set_ylabel("leak rate (lr)")
+    ax.set_title("HP map")
+    ax.grid(alpha=0.3, which="both")
+    return _save(fig, path)
+
+
+def _flatten(d: dict, prefix: str = "") -> list[tuple[str, object]]:
+    """Nested dict -> [("a.b.c", leaf)], leaves in insertion order."""
+    rows = []
+    for key, val in d.items():
+        name = f"{prefix}{key}"
+        rows += _flatten(val, name + ".") if isinstance(val, dict) and val else [(name, val)]
+    return rows
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return v if isinstance(v, str) else json.dumps(v, default=str)
+
+
+def _table(header: list[str], rows: list[list]) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(
+        f'<td class="n">{html.escape(_fmt(c))}</td>' if isinstance(c, (int, float)) and not isinstance(c, bool)
+        else f"<td>{html.escape(_fmt(c))}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _img(path: Path, alt: str) -> str:
+    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+    return f'<p><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}"></p>'
+
+
+def _test_figure(test_dir: Path, run_dir: Path) -> Path | None:
+    """``test/test_phase.png``, else one redrawn from ``test/curves.csv`` (model, seed, timestep, value) if present."""
+    if (test_dir / "test_phase.png").is_file():
+        return test_dir / "test_phase.png"
+    if not (test_dir / "curves.csv").is_file():
+        return None
+    cells: dict[str, dict[int, dict[int, float]]] = {}
+    with open(test_dir / "curves.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            val = float(row["mean_return_100"]) if row["mean_return_100"] else np.nan
+            cells.setdefault(row["model"], {}).setdefault(int(row["seed"]), {})[int(row["timestep"])] = val
+    curves = {}
+    for model, by_seed in cells.items():
+        steps = np.array(sorted({t for s in by_seed.values() for t in s}))
+        curves[model] = (steps, np.array([[s.get(t, np.nan) for t in steps] for s in by_seed.values()]))
+    return learning_curves(curves, "test phase", run_dir / "test_phase.png")[0]
+
+
+def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | None = None) -> Path:
+    """Writes ``<run_dir>/report.html`` (or ``out``), with fitness_over_trials.png and hp_map.png beside it in run_dir."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    out = Path(out) if out is not None else run_dir / "report.html"
+    cfg = study.user_attrs.get("ermrl", {})
+    k = n_reservoirs(study)
+    done, bad, best = completed(study), failed(study), ranked(study)[:1]
+    title = f"ER-MRL evolution: {cfg.get('env_id', study.study_name)}"
+    parts = [f"<h1>{html.escape(title)}</h1>", f"<p>study <code>{html.escape(study.study_name)}</code></p>"]
+
+    parts += ["<h2>Configuration</h2>", _table(["key", "value"], [[key, v] for key, v in _flatten(cfg)])]
+    generations = {t.user_attrs["generation"] for t in study.trials if "generation" in t.user_attrs}
+    parts += ["<h2>Trials</h2>", _table(["completed", "failed", "total", "generations"],
+                                        [[len(done), len(bad), len(study.trials), len(generations)]])]
+    if not done:
+        parts.append('<p class="warn">no completed trial yet</p>')
+
+    parts += ["<h2>Fitness over trials</h2>",
+              _img(fitness_over_trials(study, run_dir / "fitness_over_trials.png"), "fitness over trials"),
+              "<h2>HP map</h2>", _img(hp_map(study, run_dir / "hp_map.png"), "HP map")]
+
+    if best:
+        t = best[0]
+        p = phi(t, k)
+        parts += ["<h2>Best &Phi;</h2>",
+                  _table(["trial", "fitness", "generation"], [[t.number, t.value, t.user_attrs.get("generation", "")]]),
+                  "<h3>Parameters</h3>", _table(["param", "value"], [[n, v] for n, v in t.params.items()]),
+                  "<h3>Reservoirs</h3>",
+                  _table(["reservoir"] + list(p), [[r + 1] + [p[n][r] for n in p] for r in range(k)
+                                                    if all(len(p[n]) > r for n in p)])]
+        seeds = t.user_attrs.get("seed_fitness", [])
+        if seeds:
+            parts += ["<h3>Per-seed fitness</h3>", _table(["seed index", "fitness"], [[i, float(v)] for i, v in enumerate(seeds)])]
+
+    if bad:
+        parts += ["<h2>Failed trials</h2>", _table(["trial", "generation", "reason"], [
+            [t.number, t.user_attrs.get("generation", ""), str(t.user_attrs.get("failure", ""))] for t in bad])]
+
+    summary = run_dir / "test" / "summary.json"
+    if summary.is_file():
+        rows = json.loads(summary.read_text())
+        parts.append("<h2>Test phase</h2>")
+        fig = _test_figure(summary.parent, run_dir)
+        if fig is not None:
+            parts.append(_img(fig, "test phase"))
+        parts.append(_table(["model", "final mean", "final std", "AUC mean", "AUC std", "seeds"], [
+            [r.get("model", ""), r.get("final_mean", ""), r.get("final_std", ""), r.get("auc_mean", ""),
+             r.get("auc_std", ""), r.get("n_seeds", "")] for r in rows]))
+
+    doc = (f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
+           f"<style>{CSS}</style></head>\n<body>\n" + "\n".join(parts) + "\n</body></html>\n")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(doc, encoding="utf-8")
+    return out

@@ -1,0 +1,1 @@
+"""The paper's experiments built from the engine: the test phase (and later baselines and generalization)."""

@@ -1,0 +1,98 @@
+"""Optuna storage and studies: opening them with one-line errors, and what ermrl keeps in them.
+
+The default storage is an embedded SQLite file in the run folder. Any Optuna RDB URL works, and so does a
+journal file (a path ending in ``.log`` or ``.jsonl``, or ``journal:PATH``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import optuna
+
+from ermrl.errors import ConfigError
+
+SAMPLERS = ("cmaes", "random", "tpe")
+ATTR = "ermrl"
+"""The study user attribute that holds the evolution's config."""
+
+
+def default_storage(run_dir: Path) -> str:
+    return f"sqlite:///{run_dir / 'study.db'}"
+
+
+def make_storage(url: str) -> optuna.storages.BaseStorage:
+    """An Optuna storage for ``url``; raises ConfigError (one line) if it cannot be opened."""
+    journal = url.startswith("journal:") or url.endswith((".log", ".jsonl"))
+    try:
+        if journal:
+            path = Path(url.removeprefix("journal:"))
+            path.parent.mkdir(parents=True, exist_ok=True)
+            return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(path)))
+        if url.startswith("sqlite:///"):
+            Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
+        return optuna.storages.RDBStorage(url, engine_kwargs=_engine_kwargs(url))
+    except Exception as e:  # sqlalchemy raises many types; all mean the URL is unusable
+        reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise ConfigError(f"cannot open storage {url!r} ({reason}); use sqlite:///PATH.db, a journal file PATH.log, "
+                          "or a reachable database URL") from None
+
+
+def _engine_kwargs(url: str) -> dict:
+    if url.startswith(("postgresql", "mysql")):
+        return {"connect_args": {"connect_timeout": 5}}
+    return {}
+
+
+def make_sampler(name: str, popsize: int, seed: int | None) -> optuna.samplers.BaseSampler:
+    """Optuna's CmaEsSampler with its defaults (the paper), or random, or TPE."""
+    if name == "cmaes":
+        return optuna.samplers.CmaEsSampler(popsize=popsize, seed=seed, warn_independent_sampling=False)
+    if name == "random":
+        return optuna.samplers.RandomSampler(seed=seed)
+    if name == "tpe":
+        return optuna.samplers.TPESampler(seed=seed)
+    raise ConfigError(f"unknown sampler {name!r}; choose one of {', '.join(SAMPLERS)}")
+
+
+def open_study(storage_url: str, name: str, sampler, record: dict | None) -> optuna.Study:
+    """Creates or resumes study ``name``. With ``record``, checks that a resumed study has the same config."""
+    storage = make_storage(storage_url)
+    try:
+        study = optuna.create_study(storage=storage, study_name=name, sampler=sampler, direction="maximize",
+                                    load_if_exists=True)
+    except Exception as e:
+        raise ConfigError(f"cannot open study {name!r} in {storage_url!r} ({str(e).splitlines()[0]})") from None
+    if record is not None:
+        stored = study.user_attrs.get(ATTR)
+        if stored is None:
+            study.set_user_attr(ATTR, record)
+        elif _comparable(stored) != _comparable(record):
+            raise ConfigError(f"study {name!r} already exists with another config; rerun with the same flags to "
+                              "resume it, or pick a new --study name")
+    return study
+
+
+def load_study(storage_url: str, name: str) -> optuna.Study:
+    """An existing ermrl study; ConfigError if it does not exist or was not made by ``ermrl evolve``."""
+    storage = make_storage(storage_url)
+    try:
+        study = optuna.load_study(study_name=name, storage=storage)
+    except KeyError:
+        names = [s.study_name for s in optuna.get_all_study_summaries(storage)]
+        raise ConfigError(f"no study {name!r} in {storage_url!r}; studies there: {', '.join(names) or 'none'}") from None
+    if ATTR not in study.user_attrs:
+        raise ConfigError(f"study {name!r} was not made by `ermrl evolve` (no '{ATTR}' attribute)")
+    return study
+
+
+def _comparable(record: dict) -> str:
+    """The config without the fields that may change between a run and its resumption."""
+    keep = {k: v for k, v in record.items() if k not in ("trials",)}
+    return json.dumps(keep, sort_keys=True, default=str)
+
+
+def jsonable(obj) -> dict:
+    return json.loads(json.dumps(dataclasses.asdict(obj), default=str))

@@ -1,0 +1,126 @@
+"""The evolution report: figures and HTML built from a hand-made in-memory Optuna study (no training)."""
+
+import json
+import re
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import optuna  # noqa: E402
+import pytest  # noqa: E402
+from optuna.distributions import FloatDistribution  # noqa: E402
+from optuna.trial import TrialState, create_trial  # noqa: E402
+
+from ermrl.analysis.report import fitness_over_trials, hp_map, write_report  # noqa: E402
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+SPACE = {"sr": (1e-2, 10.0), "lr": (1e-2, 1.0), "iss": (1e-2, 10.0)}
+
+
+def make_study(k: int, n_complete: int = 40, n_failed: int = 2, env_id: str = "CartPole-v1") -> optuna.Study:
+    """A study laid out as ``ermrl evolve`` stores it; trial ``best`` (number 17 when present) has the top fitness."""
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(direction="maximize")
+    study.set_user_attr("ermrl", {
+        "env_id": env_id, "reservoirs": k, "seeds": 3, "timesteps": 10000, "sampler": "cmaes", "popsize": 8,
+        "search_space": {name: list(b) for name, b in SPACE.items()},
+        "train": {"ppo": {"learning_rate": 3e-4, "n_steps": 128}, "reservoir": {"units": 100}}})
+    names = ["sr", "lr", "iss"] if k == 1 else [f"{n}_{i}" for i in range(1, k + 1) for n in ("sr", "lr", "iss")]
+    dists = {n: FloatDistribution(*SPACE[n.split("_")[0]], log=True) for n in names}
+    rng = np.random.default_rng(k)
+    for i in range(n_complete + n_failed):
+        params = {n: float(np.exp(rng.uniform(*np.log(SPACE[n.split("_")[0]])))) for n in names}
+        phi = {h: [params[h if k == 1 else f"{h}_{r}"] for r in range(1, k + 1)] for h in ("sr", "lr", "iss")}
+        attrs = {"phi": phi, "generation": i // 8}
+        if i >= n_complete:
+            study.add_trial(create_trial(params=params, distributions=dists, state=TrialState.FAIL,
+                                         user_attrs={**attrs, "failure": "NaN loss <in PPO update>"}))
+            continue
+        value = 487.25 if i == 17 else float(rng.uniform(10, 400))
+        seeds = [value - 1.0, value, value + 1.0]
+        study.add_trial(create_trial(params=params, distributions=dists, value=value,
+                                     user_attrs={**attrs, "seed_fitness": seeds}))
+    return study
+
+
+def tiny_png(path):
+    fig, ax = plt.subplots(figsize=(1, 1))
+    ax.plot([0, 1], [0, 1])
+    fig.savefig(path, dpi=20)
+    plt.close(fig)
+
+
+@pytest.mark.parametrize("k", [1, 2])
+def test_report_contents(tmp_path, k):
+    study = make_study(k)
+    best = study.best_trial
+    assert best.number == 17 and best.value == 487.25
+    out = write_report(study, tmp_path)
+    assert out == tmp_path / "report.html" and out.is_file()
+    doc = out.read_text()
+    assert doc.count("data:image/png;base64,") >= 2
+    for name in ("fitness_over_trials.png", "hp_map.png"):
+        assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
+    # counts: completed / failed / total
+    assert re.search(r"<td class=\"n\">40</td><td class=\"n\">2</td><td class=\"n\">42</td>", doc)
+    # best Φ: trial number, fitness, every param, per-seed fitness
+    best_section = doc[doc.index("Best &Phi;"):]
+    assert "487.25" in best_section and "486.25" in best_section and "488.25" in best_section
+    assert ">17<" in best_section
+    for name, value in best.params.items():
+        assert f"<td>{name}</td>" in best_section and f"{value:.6g}" in best_section
+    # config, with nested train dict flattened
+    assert "CartPole-v1" in doc and "train.ppo.n_steps" in doc and "cmaes" in doc
+    # failure reasons are escaped
+    assert "NaN loss &lt;in PPO update&gt;" in doc and "<in PPO update>" not in doc
+    assert "Test phase" not in doc and "no completed trial yet" not in doc
+
+
+def test_report_test_phase(tmp_path):
+    study = make_study(1, n_complete=10, n_failed=0)
+    (tmp_path / "test").mkdir()
+    tiny_png(tmp_path / "test" / "test_phase.png")
+    rows = [{"model": "evolved ER-MRL", "final_mean": 451.5, "final_std": 12.25, "auc_mean": 301.75,
+             "auc_std": 8.5, "n_seeds": 5},
+            {"model": "PPO baseline", "final_mean": 210.125, "final_std": 30.0, "auc_mean": 150.0,
+             "auc_std": 9.0, "n_seeds": 5}]
+    (tmp_path / "test" / "summary.json").write_text(json.dumps(rows))
+    out = write_report(study, tmp_path, out=tmp_path / "sub" / "r.html")
+    assert out == tmp_path / "sub" / "r.html" and not (tmp_path / "report.html").exists()
+    doc = out.read_text()
+    assert doc.count("data:image/png;base64,") == 3
+    section = doc[doc.index("Test phase"):]
+    for text in ("evolved ER-MRL", "PPO baseline", "451.5", "12.25", "301.75", "210.125"):
+        assert text in section
+
+
+def test_report_test_phase_from_curves_csv(tmp_path):
+    """Without test_phase.png the figure is redrawn from test/curves.csv via learning_curves."""
+    study = make_study(1, n_complete=5, n_failed=0)
+    (tmp_path / "test").mkdir()
+    (tmp_path / "test" / "summary.json").write_text(json.dumps(
+        [{"model": "m", "final_mean": 1.0, "final_std": 0.0, "auc_mean": 1.0, "auc_std": 0.0, "n_seeds": 2}]))
+    lines = ["model,seed,timestep,mean_return_100"] + [f"m,{s},{t},{t + s}" for s in (0, 1) for t in (100, 200)]
+    (tmp_path / "test" / "curves.csv").write_text("\n".join(lines) + "\n")
+    doc = write_report(study, tmp_path).read_text()
+    assert doc.count("data:image/png;base64,") == 3
+    assert (tmp_path / "test_phase.png").read_bytes()[:8] == PNG_MAGIC
+
+
+@pytest.mark.parametrize("n_failed", [0, 3])
+def test_report_without_completed_trials(tmp_path, n_failed):
+    study = make_study(2, n_complete=0, n_failed=n_failed)
+    doc = write_report(study, tmp_path).read_text()
+    assert "no completed trial yet" in doc and "Best &Phi;" not in doc
+    assert doc.count("data:image/png;base64,") >= 2
+    assert f'<td class="n">0</td><td class="n">{n_failed}</td><td class="n">{n_failed}</td>' in doc
+
+
+def test_figures_standalone(tmp_path):
+    study = make_study(3, n_complete=12, n_failed=1)
+    for fn, name in ((fitness_over_trials, "f.png"), (hp_map, "h.png")):
+        path = fn(study, tmp_path / "figs" / name)
+        assert path == tmp_path / "figs" / name and path.read_bytes()[:8] == PNG_MAGIC
+    assert hp_map(study, tmp_path / "top5.png", top=5).stat().st_size > 0
