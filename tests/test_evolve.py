@@ -1,0 +1,141 @@
+"""Evolution, resumption, divergence, the test phase and the report, at tiny budgets."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+import optuna
+import pytest
+from optuna.trial import TrialState
+
+from ermrl.agent import AgentConfig, Phi
+from ermrl.evolve import EvolveConfig, evolve
+from ermrl.search_space import SearchSpace
+from ermrl.study import load_study, make_sampler, open_study
+from ermrl.train import Population, TrainConfig, train
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+
+def cli(*args, cwd=None, **kw):
+    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=900, **kw)
+
+
+def tiny(trials, sampler="cmaes", popsize=None, space=SearchSpace(fixed_iss=1.0)):
+    return EvolveConfig(train=TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048), space=space,
+                        trials=trials, seeds=2, sampler=sampler, popsize=popsize)
+
+
+def test_two_cmaes_generations_store_every_trial(tmp_path):
+    config = tiny(trials=12)
+    assert config.generation_size == 6  # CMA-ES default for 2 parameters: 4 + ⌊3 ln 2⌋
+    study = open_study(f"sqlite:///{tmp_path}/s.db", "s", make_sampler("cmaes", 6, 0), config.record())
+    evolve(study, config)
+    trials = study.trials
+    assert [t.state for t in trials] == [TrialState.COMPLETE] * 12
+    assert sorted(t.user_attrs["generation"] for t in trials) == [0] * 6 + [1] * 6
+    for t in trials:
+        assert t.distributions == {"sr": optuna.distributions.FloatDistribution(1e-4, 1e2, log=True),
+                                   "lr": optuna.distributions.FloatDistribution(1e-2, 1.0, log=True)}
+        assert t.user_attrs["phi"]["sr"] == [pytest.approx(t.params["sr"], rel=1e-6)]
+        assert t.user_attrs["phi"]["iss"] == [1.0]
+        assert len(t.user_attrs["seed_fitness"]) == 2 and len(t.user_attrs["curve_final"]) == 2
+        assert t.value == pytest.approx(np.mean(t.user_attrs["seed_fitness"]))
+    assert study.user_attrs["ermrl"]["popsize"] == 6 and study.user_attrs["ermrl"]["search_space"]["iss"] == {"fixed": 1.0}
+
+
+def test_divergent_candidate_is_failed_and_the_study_goes_on(tmp_path):
+    config = tiny(trials=4, sampler="random", popsize=4, space=SearchSpace())
+    study = open_study(f"sqlite:///{tmp_path}/s.db", "s", make_sampler("random", 4, 0), config.record())
+    with warnings.catch_warnings():  # a leak rate of 5 is outside the search space: x grows ×4 per step
+        warnings.simplefilter("ignore", UserWarning)
+        study.enqueue_trial({"sr": 1.0, "lr": 5.0, "iss": 1.0})
+        evolve(study, config)
+    failed = [t for t in study.trials if t.state == TrialState.FAIL]
+    assert len(failed) == 1 and failed[0].params["lr"] == 5.0
+    assert failed[0].user_attrs["failure"] == "diverged (NaN/inf) on 2 of 2 seeds"
+    assert sum(t.state == TrialState.COMPLETE for t in study.trials) == 4
+
+
+def test_extreme_but_valid_phi_stays_finite():
+    """sr = 100 and iss = 10 are the search space's corners; tanh keeps the states bounded and PPO finite."""
+    res = train(TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=4096, agent=AgentConfig(reservoirs=1)),
+                Population.grid([Phi(100.0, 1.0, 10.0), Phi(100.0, 0.01, 10.0)], 1, 3e-4, 1))
+    assert res.finite.all() and np.isfinite(res.fitness()).all()
+
+
+def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path):
+    args = ["evolve", "--env", "CartPoleNoVel-v1", "--trials", "12", "--seeds", "2", "--timesteps", "30720",
+            "--fixed-iss", "1.0", "--study", "r", "--out", str(tmp_path), "--quiet", "--no-estimate"]
+    proc = subprocess.Popen([sys.executable, "-m", "ermrl.cli", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    url = f"sqlite:///{tmp_path}/study.db"
+    first = []
+    deadline = time.time() + 600
+    while time.time() < deadline and proc.poll() is None:
+        time.sleep(0.3)
+        try:
+            trials = load_study(url, "r").trials
+        except Exception:
+            continue
+        if sum(t.state == TrialState.COMPLETE for t in trials) >= 6 and any(t.state == TrialState.RUNNING for t in trials):
+            first = [(t.number, t.value) for t in trials if t.state == TrialState.COMPLETE]
+            proc.send_signal(signal.SIGKILL)
+            break
+    proc.wait()
+    assert len(first) == 6, "the first run was not caught mid-generation"
+    r = cli(*args)
+    assert r.returncode == 0, r.stderr
+    trials = load_study(url, "r").trials
+    complete = [t for t in trials if t.state == TrialState.COMPLETE]
+    assert len(complete) == 12
+    assert set(first) <= {(t.number, t.value) for t in complete}  # nothing lost
+    assert len({t.number for t in complete}) == 12  # nothing duplicated
+    interrupted = [t for t in trials if t.state == TrialState.FAIL]
+    assert interrupted and all(t.user_attrs["failure"] == "interrupted" for t in interrupted)
+
+
+def test_test_phase_and_report_from_a_tiny_study(tmp_path):
+    r = cli("evolve", "--trials", "6", "--seeds", "2", "--timesteps", "2048", "--fixed-iss", "1.0", "--study", "t",
+            "--out", str(tmp_path), "--quiet", "--no-estimate")
+    assert r.returncode == 0, r.stderr
+    assert "best fitness" in r.stdout
+    r = cli("test", "--study", "t", "--out", str(tmp_path), "--seeds", "2", "--timesteps", "2048", "--quiet")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads((tmp_path / "test" / "summary.json").read_text())
+    assert [row["model"].split(" (")[0] for row in rows] == ["ER-MRL", "PPO", "PPO"]
+    assert rows[2]["env_id"] == "CartPole-v1" and all(row["n_seeds"] == 2 for row in rows)
+    for name in ("curves.csv", "summary.csv", "test_phase.png", "test_phase.svg"):
+        assert (tmp_path / "test" / name).stat().st_size > 0
+    r = cli("report", "--study", "t", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    html = (tmp_path / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 3  # fitness, HP map, test phase
+    assert (tmp_path / "hp_map.png").exists() and (tmp_path / "fitness_over_trials.png").exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--min-sr", "10", "--max-sr", "1"], "ermrl evolve: error: bad sr bounds [10.0, 1.0]: need 0 < --min-sr < --max-sr"),
+    (["--max-lr", "2"], "ermrl evolve: error: bad lr bounds [0.01, 2.0]: a leak rate is at most 1"),
+    (["--sampler", "nsga"], "ermrl evolve: error: unknown sampler 'nsga'; choose one of cmaes, random, tpe"),
+    (["--env", "Nope-v0"], "ermrl evolve: error: unknown env id 'Nope-v0'"),
+    (["--storage", "postgresql://u:p@127.0.0.1:9/db"], "ermrl evolve: error: cannot open storage 'postgresql://u:p@127.0.0.1:9/db'"),
+    (["--storage", "nosuchdb://x"], "ermrl evolve: error: cannot open storage 'nosuchdb://x'"),
+])
+def test_bad_evolve_flags(args, message, tmp_path):
+    r = cli("evolve", "--trials", "2", "--timesteps", "2048", *args, cwd=tmp_path)
+    assert r.returncode == 2
+    assert r.stderr.startswith(message), r.stderr
+    assert r.stderr.count("\n") == 1
+
+
+def test_test_and_report_need_an_existing_study(tmp_path):
+    for command in ("test", "report"):
+        r = cli(command, "--study", "missing", "--out", str(tmp_path))
+        assert r.returncode == 2
+        assert r.stderr.startswith(f"ermrl {command}: error: no study 'missing' in"), r.stderr
