@@ -28,8 +28,12 @@ $(REF_VENV)/.installed: pyproject.toml
 	$(REF_VENV)/bin/python -m pip --disable-pip-version-check -q install -e '.[test,reference,mujoco]'
 	touch $@
 
+# The main job: a small evolution on masked CartPole (3 CMA-ES generations, embedded SQLite in runs/demo/),
+# a short test phase of the best Φ against PPO, and the HTML report. Rerunning resumes the finished study.
 demo: $(VENV)/.installed-base
-	$(BIN)/ermrl train --env CartPoleNoVel-v1 --seeds 3 --timesteps 300000 --out runs/demo
+	$(BIN)/ermrl evolve --env CartPoleNoVel-v1 --trials 18 --seeds 3 --timesteps 50000 --fixed-iss 1.0 --study demo
+	$(BIN)/ermrl test --study demo --seeds 3 --timesteps 100000
+	$(BIN)/ermrl report --study demo
 
 test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -q
