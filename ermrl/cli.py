@@ -142,6 +142,8 @@ def _add_test(sub) -> None:
     _study_args(p)
     p.add_argument("--seeds", type=int, default=10, help="new seeds per model")
     p.add_argument("--timesteps", type=int, default=1_000_000, help="env steps per agent (paper: 1M, LunarLander 3M)")
+    p.add_argument("--ppo-lr", type=float, default=None,
+                   help="PPO learning rate of every model (default: the evolution's; the paper tests NoVel tasks at 1e-4)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -237,7 +239,7 @@ def cmd_test(args) -> int:
         return bar.update
 
     try:
-        rows = run_test_phase(study, run_dir / "test", args.seeds, args.timesteps, progress)
+        rows = run_test_phase(study, run_dir / "test", args.seeds, args.timesteps, progress, args.ppo_lr)
     finally:
         for bar in bars:
             bar.__exit__(None, None, None)

@@ -139,3 +139,26 @@ def test_test_and_report_need_an_existing_study(tmp_path):
         r = cli(command, "--study", "missing", "--out", str(tmp_path))
         assert r.returncode == 2
         assert r.stderr.startswith(f"ermrl {command}: error: no study 'missing' in"), r.stderr
+
+
+def test_journal_storage_persists_a_study(tmp_path):
+    config = tiny(trials=1)
+    url = str(tmp_path / "journal.log")
+    study = open_study(url, "j", make_sampler("random", 6, 0), config.record())
+    trial = study.ask()
+    config.space.suggest(trial)
+    study.tell(trial, 12.5)
+    again = load_study(url, "j")
+    assert [t.value for t in again.trials] == [12.5]
+    assert again.user_attrs["ermrl"]["env_id"] == "CartPoleNoVel-v1"
+    with pytest.raises(Exception, match="already exists with another config"):
+        open_study(url, "j", make_sampler("random", 6, 0), tiny(trials=1, space=SearchSpace()).record())
+
+
+def test_search_space_for_several_reservoirs():
+    space = SearchSpace(reservoirs=2, fixed_iss=None)
+    assert list(space.distributions()) == ["sr_1", "sr_2", "lr_1", "lr_2", "iss_1", "iss_2"]
+    assert space.default_popsize() == 4 + 5  # 4 + ⌊3 ln 6⌋
+    phi = space.phi_from_params({"sr_1": 1.0, "sr_2": 2.0, "lr_1": 0.1, "lr_2": 0.2, "iss_1": 3.0, "iss_2": 4.0})
+    np.testing.assert_allclose(phi.sr, [1.0, 2.0])
+    np.testing.assert_allclose(phi.iss, [3.0, 4.0])

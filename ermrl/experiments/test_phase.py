@@ -65,19 +65,24 @@ def summarize(label: str, results: Results) -> dict:
     with np.errstate(all="ignore"):
         auc = np.nanmean(curves, axis=1)
     return {"model": label, "env_id": results.env_id, "n_seeds": results.size,
+            "learning_rate": float(results.learning_rate[0]), "timesteps": results.total_timesteps,
             "final_mean": float(np.nanmean(fit)), "final_std": float(np.nanstd(fit)),
             "auc_mean": float(np.nanmean(auc)), "auc_std": float(np.nanstd(auc)),
             "per_seed": [None if np.isnan(v) else float(v) for v in fit]}
 
 
 def run_test_phase(study: optuna.Study, out: Path, seeds: int, timesteps: int,
-                   progress: Callable[[str], Callable] | None = None) -> list[dict]:
-    """Trains the three models and writes curves.csv, summary.json/.csv and test_phase.png/.svg into ``out``."""
+                   progress: Callable[[str], Callable] | None = None, learning_rate: float | None = None) -> list[dict]:
+    """Trains the three models and writes curves.csv, summary.json/.csv and test_phase.png/.svg into ``out``.
+
+    ``learning_rate`` overrides the evolution's PPO step size for every model."""
     record = study.user_attrs[ATTR]
     best, phi = best_phi(study)
     base = train_config_from_record(record, timesteps)
     test_seeds = list(range(FIRST_TEST_SEED, FIRST_TEST_SEED + seeds))
-    lr = record["learning_rate"]
+    lr = record["learning_rate"] if learning_rate is None else learning_rate
+    if not 0 < lr < 1:
+        raise ConfigError(f"learning rate {lr} is outside (0, 1); the paper uses 3e-4 or 1e-4")
     k = record["reservoirs"]
     base_id, deleted = masking.parse(base.env_id)
     phi_text = ", ".join(f"{n} {float(v[0]):.3g}" for n, v in zip(("sr", "lr", "iss"), phi)) if k == 1 else f"trial {best.number}"
