@@ -172,7 +172,7 @@ def cmd_evolve(args) -> int:
 
     from ermrl import envs
     from ermrl.agent import AgentConfig
-    from ermrl.evolve import EvolveConfig, estimate_seconds, evolve
+    from ermrl.evolve import EvolveConfig, count, estimate_seconds, evolve
     from ermrl.ppo.config import SB3_DEFAULTS
     from ermrl.progress import EvolutionBar
     from ermrl.reservoir import ReservoirSpec
@@ -197,9 +197,7 @@ def cmd_evolve(args) -> int:
     storage = args.storage or default_storage(run_dir)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = open_study(storage, name, make_sampler(args.sampler, config.generation_size, args.sampler_seed), config.record())
-    from optuna.trial import TrialState
-
-    done = sum(t.state == TrialState.COMPLETE for t in study.trials)
+    done = count(study, optuna.trial.TrialState.COMPLETE)
     print(f"study {name!r} in {storage}: {done}/{args.trials} trials done, {config.generation_size} per generation "
           f"× {args.seeds} seeds × {args.timesteps:,} steps")
     trainer = Trainer(config.train)

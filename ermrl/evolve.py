@@ -20,7 +20,7 @@ from optuna.trial import TrialState
 
 from ermrl.results import Results
 from ermrl.search_space import SearchSpace
-from ermrl.study import ATTR, jsonable
+from ermrl.runs import config_dict
 from ermrl.train import Population, Progress, TrainConfig, Trainer
 
 MAX_FAILED_GENERATIONS = 3
@@ -52,7 +52,7 @@ class EvolveConfig:
             "env_id": self.train.env_id, "reservoirs": self.space.reservoirs, "seeds": self.seeds,
             "timesteps": self.train.total_timesteps, "sampler": self.sampler, "popsize": self.generation_size,
             "learning_rate": self.train.ppo.learning_rate, "search_space": self.space.to_dict(),
-            "train": jsonable(self.train), "trials": self.trials,
+            "train": config_dict(self.train), "trials": self.trials,
         }
 
 
@@ -71,7 +71,7 @@ class GenerationProgress:
 
 
 def count(study: optuna.Study, state: TrialState) -> int:
-    return sum(t.state == state for t in study.get_trials(deepcopy=False, states=(state,)))
+    return len(study.get_trials(deepcopy=False, states=(state,)))
 
 
 def fail_interrupted(study: optuna.Study) -> int:
@@ -166,7 +166,3 @@ def evolve(study: optuna.Study, config: EvolveConfig, trainer: Trainer | None = 
             progress_fn(GenerationProgress(generation, count(study, TrialState.COMPLETE), config.trials,
                                            *_best(study), None))
     return study
-
-
-def config_from_study(study: optuna.Study) -> dict:
-    return study.user_attrs[ATTR]

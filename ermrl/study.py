@@ -6,7 +6,6 @@ journal file (a path ending in ``.log`` or ``.jsonl``, or ``journal:PATH``).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -92,7 +91,3 @@ def _comparable(record: dict) -> str:
     """The config without the fields that may change between a run and its resumption."""
     keep = {k: v for k, v in record.items() if k not in ("trials",)}
     return json.dumps(keep, sort_keys=True, default=str)
-
-
-def jsonable(obj) -> dict:
-    return json.loads(json.dumps(dataclasses.asdict(obj), default=str))
