@@ -40,7 +40,7 @@ test: $(VENV)/.installed-test
 
 # Long learning runs (full-size budgets); minutes each.
 test-slow: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -q -m slow
+	$(BIN)/python -m pytest -q -m slow || [ $$? -eq 5 ]  # 5: no slow test collected yet
 
 reference: $(REF_VENV)/.installed
 

@@ -76,6 +76,9 @@ def open_study(storage_url: str, name: str, sampler, record: dict | None) -> opt
 
 def load_study(storage_url: str, name: str) -> optuna.Study:
     """An existing ermrl study; ConfigError if it does not exist or was not made by ``ermrl evolve``."""
+    if storage_url.startswith("sqlite:///") and not Path(storage_url.removeprefix("sqlite:///")).exists():
+        raise ConfigError(f"no study {name!r}: {storage_url.removeprefix('sqlite:///')} does not exist; "
+                          "run `ermrl evolve` first or pass --storage/--out")
     storage = make_storage(storage_url)
     try:
         study = optuna.load_study(study_name=name, storage=storage)

@@ -138,7 +138,8 @@ def test_test_and_report_need_an_existing_study(tmp_path):
     for command in ("test", "report"):
         r = cli(command, "--study", "missing", "--out", str(tmp_path))
         assert r.returncode == 2
-        assert r.stderr.startswith(f"ermrl {command}: error: no study 'missing' in"), r.stderr
+        assert r.stderr.startswith(f"ermrl {command}: error: no study 'missing': "), r.stderr
+        assert not (tmp_path / "study.db").exists()  # looking does not create a database
 
 
 def test_journal_storage_persists_a_study(tmp_path):
