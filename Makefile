@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 PIP := $(BIN)/python -m pip --disable-pip-version-check -q
 
-.PHONY: demo test test-slow parity reference bench clean
+.PHONY: demo test test-slow test-reference reference bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -43,6 +43,10 @@ test-slow: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -q -m slow || [ $$? -eq 5 ]  # 5: no slow test collected yet
 
 reference: $(REF_VENV)/.installed
+
+# Tests that need torch and SB3 (the wrapper under SB3; SB3 parity comes with issue 4).
+test-reference: $(REF_VENV)/.installed
+	$(REF_VENV)/bin/python -m pytest -q -m reference
 
 bench: $(VENV)/.installed-test $(REF_VENV)/.installed
 	$(BIN)/python benchmarks/throughput.py --repeats 3 --reference-python $(REF_VENV)/bin/python
