@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
 
 import ermrl  # noqa: F401
 from ermrl.agent import AgentConfig, Phi

@@ -40,7 +40,7 @@ def measure(env_id: str, size: int, iterations: int, units: int) -> dict:
     t0 = time.perf_counter()
     trainer = Trainer(config)
     state = trainer.init(population)
-    compiled = trainer._iteration.lower(state).compile()
+    compiled = trainer.compiled(state)
     compile_s = time.perf_counter() - t0
     times = []
     for _ in range(iterations):
