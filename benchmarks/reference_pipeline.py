@@ -21,7 +21,7 @@ import os
 import sys
 import time
 
-ENVS = ("CartPoleNoVel-v1", "HalfCheetah-v5")
+ENVS = ("CartPoleNoVel-v1", "HalfCheetah-v5", "Humanoid-v5")
 FIX = "run `make reference` (or `pip install torch==2.13.0 && pip install -e .[reference]`)"
 
 
@@ -39,7 +39,7 @@ def check_deps() -> None:
 
 
 def make_env(name: str, seed: int):
-    """Build the reservoir-wrapped env: CartPole-v1 without velocities, or HalfCheetah-v5."""
+    """Build the reservoir-wrapped env: CartPole-v1 without velocities, or a Gymnasium id as it is."""
     import gymnasium as gym
     import numpy as np
     from reservoirpy.nodes import Reservoir

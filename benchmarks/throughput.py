@@ -7,6 +7,10 @@ minibatches) and reports the median agent-steps/s over the cycles after the firs
 Python given by ``--reference-python`` (a venv with `make reference`'s packages), and prints the ratio.
 
     python benchmarks/throughput.py --sizes 1 3 21 --reference-python .venv-ref/bin/python
+    python benchmarks/throughput.py --env HalfCheetah-v5 --sizes 6 21 --reference-agents 2
+
+Envs without a JAX version (MuJoCo, Box2D) run on the host backend; their rows also give the env-only
+ceiling: Gymnasium stepping the same envs with the same workers and no learning at all.
 """
 
 from __future__ import annotations
@@ -50,12 +54,35 @@ def measure(env_id: str, size: int, iterations: int, units: int) -> dict:
         times.append(time.perf_counter() - t)
     steady = times[1:] if len(times) > 1 else times
     per_iter = statistics.median(steady)
-    return {
-        "env": env_id, "agents": size, "devices": len(jax.devices()), "compile_s": compile_s,
-        "iteration_s_median": per_iter, "agent_steps_per_s": size * 2048 / per_iter,
+    row = {
+        "env": env_id, "agents": size, "devices": len(jax.devices()), "backend": "host" if trainer.host else "jax",
+        "compile_s": compile_s, "iteration_s_median": per_iter, "agent_steps_per_s": size * 2048 / per_iter,
         "agent_steps_per_s_all": [size * 2048 / t for t in steady],
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }
+    if trainer.host:
+        row["env_workers"] = len(trainer.env.groups) if len(trainer.env.groups) > 1 else 0
+        row["env_only_steps_per_s"] = env_only(trainer.env, size)
+        row["worker_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        trainer.close()
+    return row
+
+
+def env_only(env, size: int, steps: int = 300) -> float:
+    """The ceiling: Gymnasium stepping alone, same envs and workers, actions like an untrained policy's
+    (N(0, 1) clipped to the bounds)."""
+    import numpy as np
+
+    space = env.info.action
+    rng = np.random.default_rng(0)
+    if space.discrete:
+        actions = rng.integers(0, space.dim, (steps, size))
+    else:
+        actions = np.clip(rng.normal(size=(steps, size, space.dim)), space.low, space.high).astype(np.float32)
+    t = time.perf_counter()
+    for a in actions:
+        env.step(a)
+    return steps * size / (time.perf_counter() - t)
 
 
 def run_child(env_id: str, size: int, iterations: int, units: int) -> dict:
@@ -96,8 +123,12 @@ def main(argv=None) -> int:
         best = sorted(runs, key=lambda r: r["agent_steps_per_s"])[len(runs) // 2]
         best["agent_steps_per_s_repeats"] = [r["agent_steps_per_s"] for r in runs]
         rows.append(best)
+        extra = ""
+        if best["backend"] == "host":
+            extra = (f"  [host: {best['env_workers']} env workers (peak RSS {best['worker_peak_rss_mb']:.0f} MB each), "
+                     f"Gymnasium alone {best['env_only_steps_per_s']:,.0f} steps/s]")
         print(f"A={size:3d}: {best['agent_steps_per_s']:9,.0f} agent-steps/s  compile {best['compile_s']:.1f}s  "
-              f"peak RSS {best['peak_rss_mb']:.0f} MB  ({best['devices']} devices)", flush=True)
+              f"peak RSS {best['peak_rss_mb']:.0f} MB  ({best['devices']} devices){extra}", flush=True)
     result = {"jax": rows}
     if not a.no_reference:
         if not Path(a.reference_python).exists():

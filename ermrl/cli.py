@@ -36,7 +36,29 @@ def _add_train(sub) -> None:
     p.add_argument("--bias", choices=["bernoulli", "none"], default="bernoulli",
                    help="reservoir bias: ReservoirPy 0.3's ±1 on 10%% of units (the paper) or none (0.4)")
     p.add_argument("--out", type=Path, default=None, help="run folder (default runs/train-ENV-TIME)")
+    _backend_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _workers(value: str):
+    if value == "auto":
+        return value
+    try:
+        n = int(value)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"must be 'auto' or an integer >= 0, got {value!r}")
+    return n
+
+
+def _backend_args(p) -> None:
+    p.add_argument("--backend", choices=["auto", "jax", "host"], default="auto",
+                   help="auto: JAX (gymnax) when the env has a JAX version, else Gymnasium on the host; "
+                        "host runs any Gymnasium id")
+    p.add_argument("--env-workers", type=_workers, default="auto", metavar="N|auto",
+                   help="host backend: processes that step the envs (0: the main process; auto: one per core "
+                        "when an env step is costly). Results do not depend on it")
 
 
 def _phi_values(name: str, values: list[float], k: int) -> list[float]:
@@ -60,7 +82,7 @@ def cmd_train(args) -> int:
     import dataclasses
 
     k = 0 if args.no_reservoir else args.reservoirs
-    envs.describe(args.env)  # fail fast on an unknown id
+    envs.describe(args.env, args.backend)  # fail fast on an unknown id or a missing extra
     ppo = PRESETS[args.preset]
     if args.ppo_lr is not None:
         ppo = dataclasses.replace(ppo, learning_rate=args.ppo_lr)
@@ -69,7 +91,8 @@ def cmd_train(args) -> int:
     spec = ReservoirSpec(units=args.units, bias=args.bias)
     agent = AgentConfig(reservoirs=k, spec=spec, feed_action=args.feed_action, skip_connection=args.skip_connection,
                         observed_units=args.observed_units)
-    config = TrainConfig(env_id=args.env, total_timesteps=args.timesteps, agent=agent, ppo=ppo)
+    config = TrainConfig(env_id=args.env, total_timesteps=args.timesteps, agent=agent, ppo=ppo, backend=args.backend,
+                         env_workers=args.env_workers)
     phi = Phi(*(np.array(_phi_values(n, getattr(args, n), max(k, 1))[: max(k, 1)], np.float32) for n in ("sr", "lr", "iss")))
     _check_phi(phi)
     population = Population.grid(phi, args.seeds, ppo.learning_rate, k)
@@ -129,6 +152,7 @@ def _add_evolve(sub) -> None:
     p.add_argument("--storage", default=None, help="Optuna storage URL or journal file (default sqlite in the run folder)")
     p.add_argument("--out", type=Path, default=None, help="run folder (default runs/STUDY)")
     p.add_argument("--no-estimate", action="store_true", help="skip the warm-up that estimates the total time")
+    _backend_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
 
@@ -153,6 +177,36 @@ def _add_report(sub) -> None:
                                    "the HP map, the best Φ and the test phase if one was run; plots also as PNG.",
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     _study_args(p)
+
+
+def _add_plot(sub) -> None:
+    p = sub.add_parser("plot", help="plot several run folders' learning curves together",
+                       description="Read the curves.csv of each run folder (from `ermrl train` or `ermrl test`) and draw "
+                                   "every model in one figure, mean ± std over seeds.",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("runs", type=Path, nargs="+", help="run folders holding curves.csv")
+    p.add_argument("--out", type=Path, required=True, help="figure path (.png; .svg is written beside it too)")
+    p.add_argument("--title", default="", help="figure title (default: the env id of the first run)")
+
+
+def cmd_plot(args) -> int:
+    import json
+
+    from ermrl.analysis.plots import learning_curves
+    from ermrl.runs import read_curves_csv
+
+    curves = {}
+    for run in args.runs:
+        if not (run / "curves.csv").is_file():
+            raise ConfigError(f"{run} has no curves.csv; give folders written by `ermrl train` or `ermrl test`")
+        curves.update(read_curves_csv(run / "curves.csv"))
+    title = args.title
+    if not title and (args.runs[0] / "config.json").is_file():
+        title = json.loads((args.runs[0] / "config.json").read_text())["train"]["env_id"]
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    for path in learning_curves(curves, title, args.out, ("png", "svg")):
+        print(f"wrote {path}")
+    return 0
 
 
 def _study_args(p) -> None:
@@ -182,7 +236,7 @@ def cmd_evolve(args) -> int:
 
     if args.sampler not in SAMPLERS:
         raise ConfigError(f"unknown sampler {args.sampler!r}; choose one of {', '.join(SAMPLERS)}")
-    envs.describe(args.env)
+    envs.describe(args.env, args.backend)
     for name in ("trials", "seeds"):
         if getattr(args, name) < 1:
             raise ConfigError(f"--{name} must be >= 1, got {getattr(args, name)}")
@@ -190,7 +244,8 @@ def cmd_evolve(args) -> int:
                         (args.min_iss, args.max_iss), args.fixed_iss)
     ppo = SB3_DEFAULTS if args.ppo_lr is None else dataclasses.replace(SB3_DEFAULTS, learning_rate=args.ppo_lr)
     agent = AgentConfig(reservoirs=args.reservoirs, spec=ReservoirSpec(units=args.units), feed_action=args.feed_action)
-    config = EvolveConfig(train=TrainConfig(args.env, args.timesteps, agent, ppo), space=space, trials=args.trials,
+    config = EvolveConfig(train=TrainConfig(args.env, args.timesteps, agent, ppo, args.backend,
+                                                   args.env_workers), space=space, trials=args.trials,
                           seeds=args.seeds, sampler=args.sampler, popsize=args.popsize, sampler_seed=args.sampler_seed)
     name = args.study or f"{args.env}-{args.reservoirs}res-{args.timesteps // 1000}k"
     run_dir = args.out or Path("runs") / name
@@ -267,10 +322,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_evolve(sub)
     _add_test(sub)
     _add_report(sub)
+    _add_plot(sub)
     return parser
 
 
-COMMANDS = {"train": cmd_train, "evolve": cmd_evolve, "test": cmd_test, "report": cmd_report}
+COMMANDS = {"train": cmd_train, "evolve": cmd_evolve, "test": cmd_test, "report": cmd_report, "plot": cmd_plot}
 
 
 def main(argv: list[str] | None = None) -> int:

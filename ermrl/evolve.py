@@ -133,6 +133,7 @@ def estimate_seconds(trainer: Trainer, config: EvolveConfig, remaining: int) -> 
     _, log = compiled(state)
     np.asarray(log.finite)
     per_iteration = time.perf_counter() - start
+    trainer.close()
     generations = -(-remaining // size)
     return generations * trainer.n_iterations * per_iteration
 

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from ermrl.agent import Agent, Reservoirs
-from ermrl.envs.jax_backend import JaxEnv
+from ermrl.envs.jax_backend import JaxEnv, Transition
 from ermrl.ppo.networks import ActorCritic, PolicyParams
 
 
@@ -51,12 +51,68 @@ class Step(NamedTuple):
     """Length of the episode this step ended, 0 when it ended none."""
 
 
+class Act(NamedTuple):
+    """The policy's choice in n_envs envs: each field (n_envs, ...)."""
+
+    action: jax.Array
+    """Sampled action (unclipped for Box), stored for the loss."""
+    env_action: jax.Array
+    """What the env receives: the action, clipped to the Box bounds."""
+    log_prob: jax.Array
+    value: jax.Array
+
+
 def start(env: JaxEnv, agent: Agent, res: Reservoirs, key: jax.Array, n_envs: int) -> EnvCarry:
     """Resets n_envs envs and their reservoirs."""
     obs, env_state = jax.vmap(env.reset)(jax.random.split(key, n_envs))
+    return start_from_obs(agent, res, obs, env_state)
+
+
+def start_from_obs(agent: Agent, res: Reservoirs, obs: jax.Array, env_state: Any) -> EnvCarry:
+    """The carry for envs just reset to ``obs`` (n_envs, obs_dim): reservoirs reset and fed (o_0, zeros, 0)."""
+    n_envs = obs.shape[0]
     res_state, context = jax.vmap(agent.start_episode, in_axes=(None, 0))(res, obs)
     zeros = jnp.zeros((n_envs,), jnp.float32)
     return EnvCarry(env_state, res_state, context, zeros, jnp.zeros((n_envs,), jnp.int32))
+
+
+def act(net: ActorCritic, params: PolicyParams, context: jax.Array, key: jax.Array) -> Act:
+    """Samples actions for contexts (n_envs, context_dim)."""
+    action_space = net.action
+    head = net.head(params, context)
+    action = net.sample(params, head, key)
+    if action_space.discrete:
+        env_action = action
+    else:
+        env_action = jnp.clip(action, jnp.asarray(action_space.low), jnp.asarray(action_space.high))
+    return Act(action, env_action, net.log_prob(params, head, action), net.value(params, context))
+
+
+def advance(agent: Agent, res: Reservoirs, carry: EnvCarry, chosen: Act, tr: Transition) -> tuple[EnvCarry, Step]:
+    """Feeds one env step's outcome to the reservoirs and episode bookkeeping; every field (n_envs, ...)."""
+    action_enc = jax.vmap(agent.encode_action)(chosen.env_action)
+    observe = jax.vmap(agent.observe, in_axes=(None, 0, 0, 0, 0))
+    res_final, final_context = observe(res, carry.res_state, tr.final_obs, action_enc, tr.reward)
+    res_start, start_context = jax.vmap(agent.start_episode, in_axes=(None, 0))(res, tr.obs)
+
+    done = jnp.logical_or(tr.terminated, tr.truncated)
+    pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(done.reshape((-1,) + (1,) * (x.ndim - 1)), x, y), a, b)
+    episode_return = carry.episode_return + tr.reward
+    episode_length = carry.episode_length + 1
+    step = Step(
+        context=carry.context, action=chosen.action, log_prob=chosen.log_prob, value=chosen.value,
+        reward=tr.reward, done=done, truncated=tr.truncated, final_context=final_context,
+        finished_return=jnp.where(done, episode_return, jnp.nan),
+        finished_length=jnp.where(done, episode_length, 0),
+    )
+    carry = EnvCarry(
+        env_state=tr.state,
+        res_state=pick(res_start, res_final),
+        context=pick(start_context, final_context),
+        episode_return=jnp.where(done, 0.0, episode_return),
+        episode_length=jnp.where(done, 0, episode_length),
+    )
+    return carry, step
 
 
 def collect(
@@ -64,43 +120,12 @@ def collect(
     key: jax.Array, n_steps: int,
 ) -> tuple[EnvCarry, Step]:
     """Runs n_steps steps in each env. Returns the final carry and the stacked steps (n_steps, n_envs, ...)."""
-    action_space = env.info.action
     n_envs = carry.context.shape[0]
 
     def body(carry: EnvCarry, step_key):
         k_act, k_env = jax.random.split(step_key)
-        head = net.head(params, carry.context)
-        value = net.value(params, carry.context)
-        action = net.sample(params, head, k_act)
-        log_prob = net.log_prob(params, head, action)
-        if action_space.discrete:
-            env_action = action
-        else:
-            env_action = jnp.clip(action, jnp.asarray(action_space.low), jnp.asarray(action_space.high))
-        tr = jax.vmap(env.step)(jax.random.split(k_env, n_envs), carry.env_state, env_action)
-
-        action_enc = jax.vmap(agent.encode_action)(env_action)
-        observe = jax.vmap(agent.observe, in_axes=(None, 0, 0, 0, 0))
-        res_final, final_context = observe(res, carry.res_state, tr.final_obs, action_enc, tr.reward)
-        res_start, start_context = jax.vmap(agent.start_episode, in_axes=(None, 0))(res, tr.obs)
-
-        done = jnp.logical_or(tr.terminated, tr.truncated)
-        pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(done.reshape((-1,) + (1,) * (x.ndim - 1)), x, y), a, b)
-        episode_return = carry.episode_return + tr.reward
-        episode_length = carry.episode_length + 1
-        step = Step(
-            context=carry.context, action=action, log_prob=log_prob, value=value, reward=tr.reward,
-            done=done, truncated=tr.truncated, final_context=final_context,
-            finished_return=jnp.where(done, episode_return, jnp.nan),
-            finished_length=jnp.where(done, episode_length, 0),
-        )
-        carry = EnvCarry(
-            env_state=tr.state,
-            res_state=pick(res_start, res_final),
-            context=pick(start_context, final_context),
-            episode_return=jnp.where(done, 0.0, episode_return),
-            episode_length=jnp.where(done, 0, episode_length),
-        )
-        return carry, step
+        chosen = act(net, params, carry.context, k_act)
+        tr = jax.vmap(env.step)(jax.random.split(k_env, n_envs), carry.env_state, chosen.env_action)
+        return advance(agent, res, carry, chosen, tr)
 
     return jax.lax.scan(body, carry, jax.random.split(key, n_steps))

@@ -29,6 +29,20 @@ def write_curves_csv(path: Path, curves: dict[str, tuple[np.ndarray, np.ndarray]
                     w.writerow([label, int(s), int(t), "" if np.isnan(v) else f"{v:.6g}"])
 
 
+def read_curves_csv(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Inverse of :func:`write_curves_csv`: {model: (timesteps (I,), values (S, I))}, NaN where a seed has none."""
+    cells: dict[str, dict[int, dict[int, float]]] = {}
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            val = float(row["mean_return_100"]) if row["mean_return_100"] else np.nan
+            cells.setdefault(row["model"], {}).setdefault(int(row["seed"]), {})[int(row["timestep"])] = val
+    curves = {}
+    for model, by_seed in cells.items():
+        steps = np.array(sorted({t for s in by_seed.values() for t in s}))
+        curves[model] = (steps, np.array([[s.get(t, np.nan) for t in steps] for s in by_seed.values()]))
+    return curves
+
+
 def write_train_run(out: Path, config, results: Results, label: str) -> dict[str, Path]:
     """Writes config.json, episodes.csv, curves.csv, summary.json and learning_curve.png into ``out``."""
     out.mkdir(parents=True, exist_ok=True)

@@ -91,6 +91,9 @@ def load_study(storage_url: str, name: str) -> optuna.Study:
 
 
 def _comparable(record: dict) -> str:
-    """The config without the fields that may change between a run and its resumption."""
+    """The config without the fields that may change between a run and its resumption (results do not
+    depend on the number of env worker processes)."""
     keep = {k: v for k, v in record.items() if k not in ("trials",)}
+    if isinstance(keep.get("train"), dict):
+        keep["train"] = {k: v for k, v in keep["train"].items() if k != "env_workers"}
     return json.dumps(keep, sort_keys=True, default=str)

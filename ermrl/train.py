@@ -20,12 +20,14 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from ermrl import envs
 from ermrl.agent import Agent, AgentConfig, Phi, Reservoirs
 from ermrl.errors import ConfigError
+from ermrl.host_loop import HostIteration
 from ermrl.ppo import update as ppo_update
 from ermrl.ppo.config import PPOConfig
 from ermrl.ppo.losses import Batch, gae
 from ermrl.ppo.networks import ActorCritic
 from ermrl.results import Results
-from ermrl.rollout import EnvCarry, collect, start
+from ermrl.envs import HostEnv, JaxEnv
+from ermrl.rollout import EnvCarry, Step, collect, start, start_from_obs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,11 +41,16 @@ class TrainConfig:
     agent: AgentConfig = AgentConfig()
     ppo: PPOConfig = PPOConfig()
     backend: str = "auto"
-    """'auto' (JAX when the env has a JAX version) or 'jax'."""
+    """'auto' (JAX when the env has a JAX version, else Gymnasium on the host), 'jax' or 'host'."""
+    env_workers: int | str = "auto"
+    """Host backend only: processes that step the envs (0: the main process; 'auto': one per device when an
+    env step costs more than the IPC). Results do not depend on it."""
 
     def __post_init__(self):
         if self.total_timesteps < 1:
             raise ConfigError(f"total timesteps must be >= 1, got {self.total_timesteps}")
+        if self.env_workers != "auto" and not (isinstance(self.env_workers, int) and self.env_workers >= 0):
+            raise ConfigError(f"env workers must be 'auto' or an integer >= 0, got {self.env_workers!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,24 +118,41 @@ class Progress:
     compile_s: float
 
 
-def make_agent_fns(config: TrainConfig):
-    """Builds the pure per-agent ``init`` and ``iteration`` functions (purejaxrl's ``make_train``)."""
-    env = envs.make(config.env_id, config.backend)
+class AgentFns(NamedTuple):
+    """The pure per-agent functions of a TrainConfig (purejaxrl's ``make_train``); ``vmap`` adds the agent axis."""
+
+    env: JaxEnv | HostEnv
+    agent: Agent
+    net: ActorCritic
+    init: Callable
+    """(seed, unit_weights, phi, learning_rate, first_obs) -> AgentState. ``first_obs`` (n_envs, obs_dim) are
+    the reset observations of host envs; None on the JAX backend, which resets its own envs."""
+    iteration: Callable
+    """AgentState -> (AgentState, IterationLog): rollout and update, JAX backend only."""
+    learn: Callable
+    """(AgentState, final EnvCarry, Step (n_steps, n_envs, ...), key) -> (AgentState, IterationLog)."""
+
+
+def make_agent_fns(config: TrainConfig) -> AgentFns:
+    """Builds the per-agent functions for ``config``'s env, agent and PPO settings."""
+    env = envs.make(config.env_id, config.backend, config.env_workers)
     agent = Agent(config.agent, env.info)
     net = ActorCritic(env.info.action, config.ppo.hidden, config.ppo.log_std_init)
     ppo = config.ppo
 
-    def init(seed, unit_weights, phi: Phi, learning_rate) -> AgentState:
+    def init(seed, unit_weights, phi: Phi, learning_rate, first_obs) -> AgentState:
         key = jax.random.PRNGKey(seed)
         k_policy, k_env, k_next = jax.random.split(key, 3)
         res = Agent.build(unit_weights, phi)
         learner = ppo_update.init_learner(net, ppo, k_policy, agent.context_dim, learning_rate)
-        return AgentState(learner, res, start(env, agent, res, k_env, ppo.n_envs), k_next)
+        if first_obs is None:
+            carry = start(env, agent, res, k_env, ppo.n_envs)
+        else:  # host envs: the env state lives on the host
+            carry = start_from_obs(agent, res, first_obs, jnp.zeros((ppo.n_envs,), jnp.int32))
+        return AgentState(learner, res, carry, k_next)
 
-    def iteration(state: AgentState) -> tuple[AgentState, IterationLog]:
-        key, k_roll, k_update = jax.random.split(state.key, 3)
+    def learn(state: AgentState, carry: EnvCarry, steps: Step, k_update) -> tuple[AgentState, IterationLog]:
         params = state.learner.params
-        carry, steps = collect(env, agent, net, params, state.reservoirs, state.envs, k_roll, ppo.n_steps)
         final_value = net.value(params, steps.final_context)
         reward = steps.reward + ppo.gamma * final_value * steps.truncated
         advantage, ret = gae(reward, steps.value, steps.done, net.value(params, carry.context), ppo.gamma, ppo.gae_lambda)
@@ -138,9 +162,15 @@ def make_agent_fns(config: TrainConfig):
         leaves = jax.tree.leaves(learner.params) + list(metrics.values())
         finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(x)) for x in leaves]))
         log = IterationLog(steps.finished_return, steps.finished_length, metrics, finite)
-        return AgentState(learner, state.reservoirs, carry, key), log
+        return AgentState(learner, state.reservoirs, carry, state.key), log
 
-    return agent, init, iteration
+    def iteration(state: AgentState) -> tuple[AgentState, IterationLog]:
+        key, k_roll, k_update = jax.random.split(state.key, 3)
+        carry, steps = collect(env, agent, net, state.learner.params, state.reservoirs, state.envs, k_roll,
+                               ppo.n_steps)
+        return learn(state._replace(key=key), carry, steps, k_update)
+
+    return AgentFns(env, agent, net, init, iteration, learn)
 
 
 def _pad(x: np.ndarray, size: int) -> np.ndarray:
@@ -154,55 +184,65 @@ class Trainer:
 
     def __init__(self, config: TrainConfig, devices=None):
         self.config = config
-        self.agent, init, iteration = make_agent_fns(config)
+        self.fns = make_agent_fns(config)
+        self.env, self.agent = self.fns.env, self.fns.agent
+        self.host = isinstance(self.env, HostEnv)
         self.devices = list(devices if devices is not None else jax.devices())
         self.mesh = Mesh(np.array(self.devices), ("agents",))
         self.sharding = NamedSharding(self.mesh, PartitionSpec("agents"))
         spec = PartitionSpec("agents")
         shard = lambda f: jax.shard_map(jax.vmap(f), mesh=self.mesh, in_specs=spec, out_specs=spec, check_vma=False)
-        self._init = jax.jit(shard(init))
-        self._iteration = jax.jit(shard(iteration), donate_argnums=0)
+        self._init = jax.jit(shard(self.fns.init))
+        self._iteration = jax.jit(shard(self.fns.iteration), donate_argnums=0)
+        self._learn = jax.jit(shard(self.fns.learn), donate_argnums=0)
         self.n_iterations = config.ppo.iterations(config.total_timesteps)
-        self._compiled: dict[int, jax.stages.Compiled] = {}
+        self._compiled: dict[int, Callable] = {}
 
     def _padded_size(self, n: int) -> int:
         d = len(self.devices)
         return -(-n // d) * d
 
     def init(self, population: Population) -> AgentState:
-        """Initial states for the (padded) population, sharded over devices."""
+        """Initial states for the (padded) population, sharded over devices. On the host backend this opens
+        the population's envs (slot agent · n_envs + env, seeded from the agent's seed) and resets them."""
         size = self._padded_size(population.size)
+        seeds = _pad(population.seeds.astype(np.uint32), size)
         units = [self.agent.unit_weights(int(s)) for s in population.seeds]
         unit = None if units[0] is None else jax.tree.map(lambda *xs: _pad(np.stack(xs), size), *units)
         phi = None if unit is None else Phi(*(_pad(np.asarray(f, np.float32), size) for f in population.phi))
-        args = (
-            _pad(population.seeds.astype(np.uint32), size),
-            unit,
-            phi,
-            _pad(np.asarray(population.learning_rate, np.float32), size),
-        )
+        first_obs = None
+        if self.host:
+            n_envs = self.config.ppo.n_envs
+            self.env.open(size * n_envs)
+            env_seeds = [np.random.SeedSequence([int(s), e]).generate_state(1)[0] for s in seeds for e in range(n_envs)]
+            first_obs = self.env.reset(np.array(env_seeds)).reshape(size, n_envs, -1)
+        args = (seeds, unit, phi, _pad(np.asarray(population.learning_rate, np.float32), size), first_obs)
         return self._init(*jax.device_put(args, self.sharding))
 
-    def compiled(self, state: AgentState):
+    def compiled(self, state: AgentState) -> Callable:
         """The iteration compiled for ``state``'s population size; one compile per size, reused by later runs."""
         size = jax.tree.leaves(state)[0].shape[0]
         if size not in self._compiled:
-            self._compiled[size] = self._iteration.lower(state).compile()
+            if self.host:
+                iteration = HostIteration(self.fns, self.config.ppo, self._learn, self.sharding, self.devices[0])
+                iteration.warm_up(state)
+                self._compiled[size] = iteration
+            else:
+                self._compiled[size] = self._iteration.lower(state).compile()
         return self._compiled[size]
+
+    def close(self):
+        """Closes the host envs (and their worker processes); ``init`` reopens them. No-op on the JAX backend."""
+        if self.host:
+            self.env.close()
 
     def step(self, state: AgentState) -> tuple[AgentState, IterationLog]:
         """One rollout + PPO update for every agent (donates ``state``)."""
-        return self._iteration(state)
+        return self.compiled(state)(state)
 
-    def run(self, population: Population, progress_fn: Callable[[Progress], None] | None = None) -> Results:
-        """Trains every agent of ``population`` for ``total_timesteps``; returns curves and fitness."""
-        ppo = self.config.ppo
-        n = population.size
-        t0 = time.perf_counter()
-        state = self.init(population)
-        compiled = self.compiled(state)
-        compile_s = time.perf_counter() - t0
-        steps_per_iter = ppo.buffer_size
+    def _loop(self, compiled, state: AgentState, n: int, compile_s: float, progress_fn):
+        """The host loop over iterations: gathers finished episodes and metrics of the first n agents."""
+        steps_per_iter = self.config.ppo.buffer_size
         finished: list[tuple[np.ndarray, np.ndarray]] = []
         metrics, finite = [], np.ones(n, bool)
         t1 = time.perf_counter()
@@ -215,7 +255,21 @@ class Trainer:
             if progress_fn is not None:
                 progress_fn(Progress(it + 1, self.n_iterations, (it + 1) * steps_per_iter * n,
                                      self.n_iterations * steps_per_iter * n, time.perf_counter() - t1, compile_s))
-        train_s = time.perf_counter() - t1
+        return finished, metrics, finite
+
+    def run(self, population: Population, progress_fn: Callable[[Progress], None] | None = None) -> Results:
+        """Trains every agent of ``population`` for ``total_timesteps``; returns curves and fitness."""
+        ppo = self.config.ppo
+        n = population.size
+        t0 = time.perf_counter()
+        try:
+            state = self.init(population)
+            compiled = self.compiled(state)
+            compile_s = time.perf_counter() - t0
+            finished, metrics, finite = self._loop(compiled, state, n, compile_s, progress_fn)
+        finally:
+            self.close()
+        train_s = time.perf_counter() - t0 - compile_s
         return Results.from_iterations(
             config=self.config, population=population, finished=finished, metrics=metrics, finite=finite,
             n_envs=ppo.n_envs, compile_s=compile_s, train_s=train_s,

@@ -26,6 +26,18 @@ def test_train_writes_a_run_folder(tmp_path):
     assert len(summary["fitness"]) == 2 and summary["episodes"][0] > 10
     assert (out / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
 
+    plain = tmp_path / "plain"
+    r = ermrl("train", "--env", "CartPoleNoVel-v1", "--no-reservoir", "--seeds", "1", "--timesteps", "2048",
+              "--out", str(plain), "--quiet")
+    assert r.returncode == 0, r.stderr
+    figure = tmp_path / "both.png"
+    r = ermrl("plot", str(out), str(plain), "--out", str(figure))
+    assert r.returncode == 0, r.stderr
+    assert figure.read_bytes()[:4] == b"\x89PNG" and figure.with_suffix(".svg").stat().st_size > 0
+    r = ermrl("plot", str(tmp_path / "missing"), "--out", str(figure))
+    assert r.returncode == 2 and r.stderr == (f"ermrl plot: error: {tmp_path / 'missing'} has no curves.csv; "
+                                              "give folders written by `ermrl train` or `ermrl test`\n")
+
 
 def test_help_explains_every_flag():
     top = ermrl("--help")
@@ -33,12 +45,14 @@ def test_help_explains_every_flag():
     sub = ermrl("train", "--help")
     assert sub.returncode == 0
     for flag in ("--env", "--units", "--sr", "--lr", "--iss", "--seeds", "--timesteps", "--no-reservoir", "--ppo-lr",
-                 "--out", "--reservoirs", "--feed-action", "--skip-connection", "--observed-units", "--bias", "--preset"):
+                 "--out", "--reservoirs", "--feed-action", "--skip-connection", "--observed-units", "--bias", "--preset",
+                 "--backend", "--env-workers"):
         assert flag in sub.stdout, flag
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--env", "Nope-v0"], "ermrl train: error: unknown env id 'Nope-v0'; the JAX backend runs:"),
+    (["--env", "Nope-v0"], "ermrl train: error: unknown env id 'Nope-v0': Gymnasium has no 'Nope-v0'"),
+    (["--env", "LunarLander-v3", "--backend", "jax"], "ermrl train: error: env 'LunarLander-v3' has no JAX version"),
     (["--env", "AcrobotNoVel-v1"], "ermrl train: error: no velocity mask is known for 'Acrobot-v1'"),
     (["--lr", "1.5"], "ermrl train: error: --lr (leak rate) must be in (0, 1], got [1.5]"),
     (["--sr", "-1"], "ermrl train: error: --sr must be positive and finite, got [-1.0]"),

@@ -8,7 +8,6 @@ The study keeps its configuration in ``study.user_attrs["ermrl"]``; each complet
 from __future__ import annotations
 
 import base64
-import csv
 import html
 import json
 import math
@@ -25,7 +24,8 @@ from matplotlib.colors import Normalize  # noqa: E402
 from optuna.study import StudyDirection  # noqa: E402
 from optuna.trial import FrozenTrial, TrialState  # noqa: E402
 
-from ermrl.analysis.plots import learning_curves  # noqa: E402
+from ermrl.analysis.plots import learning_curves
+from ermrl.runs import read_curves_csv
 
 MARKERS = ("o", "^", "s", "D", "v", "P", "*", "X")
 CSS = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;color:#222;line-height:1.4}
@@ -181,16 +181,7 @@ def _test_figure(test_dir: Path, run_dir: Path) -> Path | None:
         return test_dir / "test_phase.png"
     if not (test_dir / "curves.csv").is_file():
         return None
-    cells: dict[str, dict[int, dict[int, float]]] = {}
-    with open(test_dir / "curves.csv", newline="") as f:
-        for row in csv.DictReader(f):
-            val = float(row["mean_return_100"]) if row["mean_return_100"] else np.nan
-            cells.setdefault(row["model"], {}).setdefault(int(row["seed"]), {})[int(row["timestep"])] = val
-    curves = {}
-    for model, by_seed in cells.items():
-        steps = np.array(sorted({t for s in by_seed.values() for t in s}))
-        curves[model] = (steps, np.array([[s.get(t, np.nan) for t in steps] for s in by_seed.values()]))
-    return learning_curves(curves, "test phase", run_dir / "test_phase.png")[0]
+    return learning_curves(read_curves_csv(test_dir / "curves.csv"), "test phase", run_dir / "test_phase.png")[0]
 
 
 def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | None = None) -> Path:

@@ -1,17 +1,20 @@
 """One registry for every env id: ``describe(env_id)`` and ``make(env_id)``.
 
 Two backends sit behind it: ``jax`` (gymnax, stepped inside the jitted program) and ``host`` (Gymnasium,
-stepped on the host; issue 4). Velocity masking and the NoVel ids live in :mod:`ermrl.envs.masking`.
+stepped on the host from inside the same program). Velocity masking and the NoVel ids live in :mod:`ermrl.envs.masking`.
 """
 
 from __future__ import annotations
 
-from ermrl.envs import masking
+import difflib
+
+from ermrl.envs import host_backend, masking
+from ermrl.envs.host_backend import HostEnv
 from ermrl.envs.jax_backend import GYMNAX_IDS, JaxEnv
 from ermrl.envs.spaces import ActionSpace, EnvInfo
 from ermrl.errors import ConfigError
 
-BACKENDS = ("auto", "jax")
+BACKENDS = ("auto", "jax", "host")
 
 
 def jax_ids() -> list[str]:
@@ -21,27 +24,46 @@ def jax_ids() -> list[str]:
     return sorted(ids)
 
 
+def _unknown(env_id: str, base_id: str) -> ConfigError:
+    import gymnasium as gym
+
+    close = difflib.get_close_matches(base_id, sorted(set(gym.registry) | set(jax_ids())), n=3)
+    hint = f"; did you mean {', '.join(close)}?" if close else "; any Gymnasium id works, or a NoVel id of " + \
+        ", ".join(masking.VELOCITY_DIMS)
+    return ConfigError(f"unknown env id {env_id!r}: Gymnasium has no {base_id!r}{hint}")
+
+
 def resolve_backend(env_id: str, backend: str = "auto") -> str:
-    """The backend that will run ``env_id``: 'jax' when it has a JAX version."""
+    """The backend that will run ``env_id``: 'jax' when it has a JAX version, else 'host' (Gymnasium)."""
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
     base_id, _ = masking.parse(env_id)
-    if base_id in GYMNAX_IDS:
+    if backend in ("auto", "jax") and base_id in GYMNAX_IDS:
         return "jax"
-    raise ConfigError(f"unknown env id {env_id!r}; the JAX backend runs: {', '.join(jax_ids())}")
+    if backend == "jax":
+        raise ConfigError(f"env {env_id!r} has no JAX version; use --backend host or auto "
+                          f"(the JAX backend runs: {', '.join(jax_ids())})")
+    if not host_backend.known(base_id):
+        raise _unknown(env_id, base_id)
+    return "host"
 
 
 def describe(env_id: str, backend: str = "auto") -> EnvInfo:
     """Observation and action layout of ``env_id`` after masking."""
-    resolve_backend(env_id, backend)
     base_id, deleted = masking.parse(env_id)
+    if resolve_backend(env_id, backend) == "host":
+        return host_backend.describe(env_id, base_id, deleted)
     full = JaxEnv.describe(env_id, base_id, None)
     return JaxEnv.describe(env_id, base_id, masking.kept_dims(full.obs_dim, deleted))
 
 
-def make(env_id: str, backend: str = "auto") -> JaxEnv:
-    """An env for ``env_id`` on the chosen backend."""
-    return JaxEnv(describe(env_id, backend))
+def make(env_id: str, backend: str = "auto", workers: int | str = "auto") -> JaxEnv | HostEnv:
+    """An env for ``env_id`` on the chosen backend (``workers``: host env processes, 'auto' or a count)."""
+    info = describe(env_id, backend)
+    if resolve_backend(env_id, backend) == "host":
+        return HostEnv(info, workers)
+    return JaxEnv(info)
 
 
-__all__ = ["ActionSpace", "EnvInfo", "JaxEnv", "describe", "make", "jax_ids", "resolve_backend", "BACKENDS"]
+__all__ = ["ActionSpace", "EnvInfo", "HostEnv", "JaxEnv", "describe", "make", "jax_ids", "resolve_backend",
+           "BACKENDS"]

@@ -46,7 +46,8 @@ def train_config_from_record(record: dict, timesteps: int) -> TrainConfig:
     ppo = dict(t["ppo"])
     ppo["hidden"] = tuple(ppo["hidden"])
     return TrainConfig(env_id=t["env_id"], total_timesteps=timesteps, agent=AgentConfig(**agent),
-                       ppo=PPOConfig(**ppo), backend=t.get("backend", "auto"))
+                       ppo=PPOConfig(**ppo), backend=t.get("backend", "auto"),
+                       env_workers=t.get("env_workers", "auto"))
 
 
 def best_phi(study: optuna.Study) -> tuple[optuna.trial.FrozenTrial, Phi]:

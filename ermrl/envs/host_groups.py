@@ -1,0 +1,165 @@
+"""Gymnasium envs stepped on the host, in the main process or in worker processes.
+
+An :class:`EnvGroup` owns a contiguous range of env *slots* (slot = agent · n_envs + env) and steps them with
+Gymnasium's same-step autoreset semantics: when an episode ends, ``step`` returns the reset observation as
+``obs`` and the observation that ended the episode as ``final_obs``, exactly as the JAX backend does.
+
+Gymnasium's ``AsyncVectorEnv`` runs one process per env, which costs more than a MuJoCo step on a 2-core
+machine with dozens of agents; here each worker process holds a whole group of envs instead.
+"""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import warnings
+from multiprocessing.connection import Connection
+from typing import NamedTuple
+
+import numpy as np
+
+
+class Stepped(NamedTuple):
+    """One step of B envs, unpacked from the (B, 2·obs_dim + 3) float32 array that groups return
+    (columns: obs, final_obs, reward, terminated, truncated). One array crosses the process pipe and the
+    host-to-JAX boundary instead of five. ``unpack`` works on NumPy and JAX arrays with any leading axes."""
+
+    obs: np.ndarray
+    """(..., obs_dim) float32 masked observation to act on next (the reset one if the episode ended)."""
+    final_obs: np.ndarray
+    """(..., obs_dim) float32 masked observation reached by the step, before any reset."""
+    reward: np.ndarray
+    """(...,) float32."""
+    terminated: np.ndarray
+    """(...,) bool."""
+    truncated: np.ndarray
+    """(...,) bool, False when the step also terminated."""
+
+    @staticmethod
+    def unpack(packed, obs_dim: int) -> "Stepped":
+        d = obs_dim
+        return Stepped(packed[..., :d], packed[..., d:2 * d], packed[..., 2 * d],
+                       packed[..., 2 * d + 1] > 0.5, packed[..., 2 * d + 2] > 0.5)
+
+
+def make_gymnasium(base_id: str):
+    """``gymnasium.make`` without the passive checker (it costs a few µs a step), warnings silenced."""
+    import gymnasium as gym
+
+    if "mujoco" in str(gym.spec(base_id).entry_point):
+        _quiet_mujoco()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return gym.make(base_id, disable_env_checker=True)
+
+
+def _quiet_mujoco():
+    """MuJoCo 4 warns on stderr, at every model load, that Gymnasium's XML uses the deprecated
+    'settotalmass'; that one message is dropped, every other MuJoCo warning still printed."""
+    import mujoco
+
+    def warn(message: str):
+        if "settotalmass" not in message:
+            print(f"MuJoCo warning: {message}", file=sys.stderr)
+
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(warn)
+
+
+class EnvGroup:
+    """The envs of slots [first, first + size), all of one base id."""
+
+    def __init__(self, base_id: str, kept_dims: tuple[int, ...], discrete: bool, first: int, size: int):
+        self.first, self.size = first, size
+        self.kept = np.asarray(kept_dims)
+        self.discrete = discrete
+        self.envs = [make_gymnasium(base_id) for _ in range(size)]
+
+    def _mask(self, obs) -> np.ndarray:
+        return np.asarray(obs, np.float32)[self.kept]
+
+    def reset(self, seeds: np.ndarray) -> np.ndarray:
+        """Seeds and resets every env of the group: seeds (size,) -> (size, obs_dim) masked observations."""
+        return np.stack([self._mask(env.reset(seed=int(seed))[0]) for env, seed in zip(self.envs, seeds)])
+
+    def step(self, actions: np.ndarray) -> np.ndarray:
+        """Steps every env: actions (size,) int or (size, dim) float. Returns the packed (size, 2·obs_dim + 3)
+        :class:`Stepped`. Non-finite Box actions (a diverged policy) are replaced by 0 so that the simulator
+        survives; training reports the divergence."""
+        d = len(self.kept)
+        out = np.zeros((self.size, 2 * d + 3), np.float32)
+        if not self.discrete:
+            actions = np.nan_to_num(actions, nan=0.0, posinf=0.0, neginf=0.0)
+        for i, env in enumerate(self.envs):
+            o, r, term, trunc, _ = env.step(int(actions[i]) if self.discrete else actions[i])
+            out[i, d:2 * d] = np.asarray(o)[self.kept]
+            out[i, 2 * d:] = r, term, trunc and not term
+            if term or trunc:
+                o, _ = env.reset()
+            out[i, :d] = np.asarray(o)[self.kept]
+        return out
+
+    def close(self):
+        for env in self.envs:
+            env.close()
+
+
+def serve(fd: int):
+    """Worker process loop on socket ``fd``: builds an EnvGroup from the first message, then answers
+    ('reset'|'step'|'close', *args) messages."""
+    conn = Connection(fd)
+    group = EnvGroup(*conn.recv())
+    conn.send("ready")
+    while True:
+        command, *payload = conn.recv()
+        if command == "close":
+            group.close()
+            conn.close()
+            return
+        try:
+            conn.send(("ok", getattr(group, command)(*payload)))
+        except Exception as error:  # report to the main process, which raises it
+            conn.send(("error", f"{type(error).__name__}: {error}"))
+
+
+class WorkerGroup:
+    """An EnvGroup living in its own process; ``send``/``receive`` split a call so groups step in parallel.
+
+    The worker is a fresh interpreter (``python -c``), not a multiprocessing child: fork is unsafe under JAX's
+    threads, and spawn would re-run the user's main script."""
+
+    def __init__(self, *args):
+        self.first, self.size = args[3], args[4]
+        parent, child = socket.socketpair()
+        code = f"from ermrl.envs.host_groups import serve; serve({child.fileno()})"
+        self.process = subprocess.Popen([sys.executable, "-c", code], pass_fds=[child.fileno()])
+        child.close()
+        self.conn = Connection(parent.detach())
+        self.conn.send(args)
+        try:
+            ready = self.conn.recv()
+        except EOFError:
+            ready = None
+        if ready != "ready":
+            raise RuntimeError("an env worker process failed to start; see its error above")
+
+    def send(self, command: str, *payload):
+        self.conn.send((command, *payload))
+
+    def receive(self):
+        status, value = self.conn.recv()
+        if status == "error":
+            raise RuntimeError(f"env worker: {value}")
+        return value
+
+    def close(self):
+        try:
+            self.conn.send(("close",))
+        except (BrokenPipeError, OSError):
+            pass
+        try:
+            self.process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+        self.conn.close()
