@@ -62,15 +62,15 @@ def measure(env_id: str, size: int, iterations: int, units: int) -> dict:
     }
     if trainer.host:
         row["env_workers"] = len(trainer.env.groups) if len(trainer.env.groups) > 1 else 0
-        row["env_only_steps_per_s"] = env_only(trainer.env, size)
+        row["env_only_steps_per_s"] = env_only(trainer.env, sum(g.size for g in trainer.env.groups))
         row["worker_peak_rss_mb"] = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
         trainer.close()
     return row
 
 
 def env_only(env, size: int, steps: int = 300) -> float:
-    """The ceiling: Gymnasium stepping alone, same envs and workers, actions like an untrained policy's
-    (N(0, 1) clipped to the bounds)."""
+    """The ceiling: Gymnasium stepping alone, the same ``size`` open slots (the population padded to a
+    multiple of the devices) and workers, actions like an untrained policy's (N(0, 1) clipped to the bounds)."""
     import numpy as np
 
     space = env.info.action

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from ermrl.envs.host_groups import EnvGroup, Stepped, WorkerGroup, make_gymnasium
+from ermrl.envs.host_groups import EnvGroup, WorkerGroup, make_gymnasium
 from ermrl.envs.spaces import ActionSpace, EnvInfo
 from ermrl.errors import ConfigError
 
@@ -135,6 +135,6 @@ class HostEnv:
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Steps every slot with actions (n_slots,) int or (n_slots, dim) float, auto-resetting ended episodes.
-        Returns the packed :class:`Stepped`, (n_slots, 2·obs_dim + 3) float32."""
+        Returns the packed :class:`ermrl.envs.host_groups.Stepped`, (n_slots, 2·obs_dim + 3) float32."""
         parts = self._call("step", np.asarray(actions))
         return parts[0] if len(parts) == 1 else np.concatenate(parts)

@@ -57,7 +57,10 @@ def make_gymnasium(base_id: str):
 def _quiet_mujoco():
     """MuJoCo 4 warns on stderr, at every model load, that Gymnasium's XML uses the deprecated
     'settotalmass'; that one message is dropped, every other MuJoCo warning still printed."""
-    import mujoco
+    try:
+        import mujoco
+    except ImportError:  # no [mujoco] extra: gym.make raises DependencyNotInstalled, which names it
+        return
 
     def warn(message: str):
         if "settotalmass" not in message:
@@ -148,7 +151,11 @@ class WorkerGroup:
         self.conn.send((command, *payload))
 
     def receive(self):
-        status, value = self.conn.recv()
+        try:
+            status, value = self.conn.recv()
+        except (EOFError, ConnectionResetError):
+            code = self.process.wait(timeout=5)
+            raise RuntimeError(f"an env worker process died (exit code {code}); see its error above") from None
         if status == "error":
             raise RuntimeError(f"env worker: {value}")
         return value
