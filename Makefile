@@ -49,7 +49,7 @@ reference: $(REF_VENV)/.installed
 test-reference: $(REF_VENV)/.installed
 	$(REF_VENV)/bin/python -m pytest -q -m reference
 
-# PPO parity with SB3 on CartPole-v1 and Pendulum-v1 (5 seeds x 100k each; about 15 min on 2 cores).
+# PPO parity with SB3 on CartPole-v1 and Pendulum-v1 (5 seeds x 100k each; about 17 min on 2 cores).
 parity: $(REF_VENV)/.installed
 	$(REF_VENV)/bin/python -m pytest -q -s -m reference tests/test_parity_sb3.py
 
