@@ -112,11 +112,16 @@ class HostIteration:
             buffer[:, t] = step
         return carry, buffer
 
-    def warm_up(self, state):
-        """Compiles every function for ``state``'s shapes without stepping any env."""
+    def _start(self, state):
+        """Keys for the iteration, and the rollout's inputs on ``device``: (next key, params, reservoirs,
+        carry, step keys (n_steps, A, 2) NumPy, update key)."""
         key, step_keys, k_update = self._begin(jax.device_put(state.key, self.device))
         params, res, carry = jax.device_put((state.learner.params, state.reservoirs, state.envs), self.device)
-        step_keys = np.ascontiguousarray(np.asarray(step_keys).swapaxes(0, 1))
+        return key, params, res, carry, np.ascontiguousarray(np.asarray(step_keys).swapaxes(0, 1)), k_update
+
+    def warm_up(self, state):
+        """Compiles every function for ``state``'s shapes without stepping any env."""
+        _, params, res, carry, step_keys, k_update = self._start(state)
         chosen = self._choose(params, carry.context, step_keys[0])
         packed = np.zeros(carry.context.shape[:2] + (2 * self.env.info.obs_dim + 3,), np.float32)
         _, self.step_like = jax.eval_shape(self._advance_shape, res, carry, chosen, packed)
@@ -132,9 +137,7 @@ class HostIteration:
     def collect(self, state):
         """The rollout half of an iteration. Returns (next key, final carry, packed steps
         (A, n_steps, n_envs, width) NumPy, update key); ``unpack_steps(steps, self.step_like)`` reads them."""
-        key, step_keys, k_update = self._begin(jax.device_put(state.key, self.device))
-        params, res, carry = jax.device_put((state.learner.params, state.reservoirs, state.envs), self.device)
-        step_keys = np.ascontiguousarray(np.asarray(step_keys).swapaxes(0, 1))
+        key, params, res, carry, step_keys, k_update = self._start(state)
         carry, steps = self.rollout(params, res, carry, step_keys)
         return key, carry, steps, k_update
 
