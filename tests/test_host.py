@@ -30,13 +30,13 @@ def host_config(env_id, timesteps, reservoirs=0, ppo=SB3_DEFAULTS, workers=0):
                        backend="host", env_workers=workers)
 
 
-def replay(env_id: str, seed: int, actions: np.ndarray):
+def replay(env_id: str, seed: int, actions: np.ndarray, env_index: int = 0):
     """A plain Gymnasium loop with the same seed and actions: per-step observations (after any reset),
     and the (return, length) of each finished episode."""
     base_id, deleted = envs.masking.parse(env_id)
     env = gym.make(base_id)
     kept = [i for i in range(env.observation_space.shape[0]) if i not in deleted]
-    obs, _ = env.reset(seed=int(np.random.SeedSequence([seed, 0]).generate_state(1)[0]))
+    obs, _ = env.reset(seed=int(np.random.SeedSequence([seed, env_index]).generate_state(1)[0]))
     seen, episodes, ret, length = [], [], 0.0, 0
     for a in actions:
         seen.append(np.asarray(obs, np.float32)[kept])
@@ -53,27 +53,30 @@ def replay(env_id: str, seed: int, actions: np.ndarray):
     return np.stack(seen), episodes
 
 
-@pytest.mark.parametrize("env_id", ["CartPole-v1", "PendulumNoVel-v1"])
-def test_episode_bookkeeping_matches_a_plain_gymnasium_loop(env_id):
-    """CartPole ends by termination, Pendulum by the 200-step time limit (and has Box actions to clip)."""
-    trainer = Trainer(host_config(env_id, 1024, ppo=dataclasses.replace(SB3_DEFAULTS, n_steps=1024)))
+@pytest.mark.parametrize("env_id, n_envs", [("CartPole-v1", 1), ("PendulumNoVel-v1", 1), ("CartPole-v1", 2)])
+def test_episode_bookkeeping_matches_a_plain_gymnasium_loop(env_id, n_envs):
+    """CartPole ends by termination, Pendulum by the 200-step time limit (and has Box actions to clip). With
+    2 envs per agent, the second env (slot 1) is replayed."""
+    ppo = dataclasses.replace(SB3_DEFAULTS, n_steps=1024 // n_envs, n_envs=n_envs)
+    trainer = Trainer(host_config(env_id, 1024, ppo=ppo))
     population = Population.grid(Phi(0.95, 0.5, 1.0), [7], 3e-4, 0)
+    e = n_envs - 1
     state = trainer.init(population)
     iteration = trainer.compiled(state)
     _, _, packed, _ = iteration.collect(state)
     trainer.env.close()
     steps = unpack_steps(np.asarray(packed), iteration.step_like)
-    seen, episodes = replay(env_id, 7, np.asarray(steps.action[0, :, 0]))
+    seen, episodes = replay(env_id, 7, np.asarray(steps.action[0, :, e]), e)
 
     # With no reservoir the context is the observation: the policy saw exactly what Gymnasium returned.
-    np.testing.assert_allclose(np.asarray(steps.context[0, :, 0]), seen, rtol=1e-6, atol=1e-6)
-    done = np.asarray(steps.done[0, :, 0])
-    ours = list(zip(np.asarray(steps.finished_return[0, :, 0])[done], np.asarray(steps.finished_length[0, :, 0])[done]))
-    assert len(episodes) >= 4
+    np.testing.assert_allclose(np.asarray(steps.context[0, :, e]), seen, rtol=1e-6, atol=1e-6)
+    done = np.asarray(steps.done[0, :, e])
+    ours = list(zip(np.asarray(steps.finished_return[0, :, e])[done], np.asarray(steps.finished_length[0, :, e])[done]))
+    assert len(episodes) >= 2
     assert [l for _, l in ours] == [l for _, l in episodes]
     np.testing.assert_allclose([r for r, _ in ours], [r for r, _ in episodes], rtol=1e-5)
     if env_id.startswith("Pendulum"):
-        assert np.asarray(steps.truncated[0, :, 0]).sum() == len(episodes)  # every episode hit the time limit
+        assert np.asarray(steps.truncated[0, :, e]).sum() == len(episodes)  # every episode hit the time limit
 
 
 def test_worker_processes_give_identical_results():
