@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from ermrl.envs.host_groups import EnvGroup, WorkerGroup, make_gymnasium
+from ermrl.envs.masking import kept_dims
 from ermrl.envs.spaces import ActionSpace, EnvInfo
 from ermrl.errors import ConfigError
 
@@ -61,8 +62,7 @@ def describe(env_id: str, base_id: str, deleted: tuple[int, ...]) -> EnvInfo:
         obs_dim = space.shape[0]
         if any(d >= obs_dim for d in deleted):
             raise ConfigError(f"env {env_id!r}: velocity dims {deleted} do not fit a {obs_dim}-dim observation")
-        kept = tuple(i for i in range(obs_dim) if i not in set(deleted))
-        return EnvInfo(env_id, base_id, kept, action, int(env.spec.max_episode_steps or 0))
+        return EnvInfo(env_id, base_id, kept_dims(obs_dim, deleted), action, int(env.spec.max_episode_steps or 0))
     finally:
         env.close()
 
@@ -94,13 +94,19 @@ class HostEnv:
         self.info = info
         self.workers = workers
         self.groups: list[EnvGroup | WorkerGroup] = []
+        self._step_s: float | None = None
+        """``step_seconds`` measured once, not at every ``open`` (an evolution opens once per generation)."""
 
     def resolved_workers(self, n_slots: int) -> int:
         """Worker processes to use: 'auto' gives one per core when a step costs more than the IPC."""
         if self.workers != "auto":
             return min(int(self.workers), n_slots)
         cores = os.cpu_count() or 1
-        return min(cores, n_slots) if cores > 1 and step_seconds(self.info) > WORKER_THRESHOLD_S else 0
+        if cores == 1:
+            return 0
+        if self._step_s is None:
+            self._step_s = step_seconds(self.info)
+        return min(cores, n_slots) if self._step_s > WORKER_THRESHOLD_S else 0
 
     def open(self, n_slots: int):
         """Creates the envs of ``n_slots`` slots (closing any open ones)."""
