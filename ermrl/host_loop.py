@@ -67,7 +67,8 @@ class HostIteration:
             return key, jax.random.split(k_roll, ppo.n_steps), k_update
 
         def choose(params, context, step_key) -> Act:
-            return act(net, params, context, jax.random.split(step_key)[0])  # the JAX backend's k_act
+            k_act = jax.random.split(step_key)[0]  # as on the JAX backend
+            return act(net, params, context, net.noise(k_act, context.shape[:1]))
 
         def advance_packed(res, carry, chosen, packed):
             out = Stepped.unpack(packed, d)

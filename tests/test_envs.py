@@ -68,3 +68,28 @@ def test_jax_dynamics_match_gymnasium(env_id):
             break
         state = tr.state
     assert t > 5
+
+
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "Pendulum-v1"])
+def test_step_with_randomness_drawn_ahead_equals_gymnax_step(env_id):
+    """The rollout draws each step's reset ahead (``draw`` then ``step_from``); over several episodes, with
+    terminations (CartPole) and time limits (Pendulum), it matches gymnax's own auto-resetting ``step``."""
+    env = envs.make(env_id)
+    raw, params = env._env, env._params
+    ours, theirs = jax.jit(env.step), jax.jit(lambda k, s, a: raw.step(k, s, a, params))
+    _, state = env.reset(jax.random.PRNGKey(0))
+    rng = np.random.default_rng(1)
+    ends = 0
+    for t in range(700):
+        key = jax.random.PRNGKey(100 + t)
+        action = jnp.array(int(rng.integers(2))) if env.info.action.discrete else jnp.array([rng.uniform(-2, 2)])
+        tr = ours(key, state, action)
+        obs, ref_state, reward, terminated, truncated, info = theirs(key, state, action)
+        np.testing.assert_array_equal(tr.obs, obs)
+        np.testing.assert_array_equal(tr.final_obs, info["final_observation"])
+        jax.tree.map(np.testing.assert_array_equal, tr.state, ref_state)
+        assert (float(tr.reward), bool(tr.terminated)) == (float(reward), bool(terminated))
+        assert bool(tr.truncated) == (bool(truncated) and not bool(terminated))
+        ends += bool(terminated) or bool(truncated)
+        state = tr.state
+    assert ends >= 3

@@ -82,6 +82,24 @@ def test_log_prob_and_entropy():
     assert float(cat.entropy(q, logits)[0]) == pytest.approx(-(probs * np.log(probs)).sum(), rel=1e-5)
 
 
+def test_sampling_from_noise_drawn_ahead():
+    """``sample(noise(key))`` is ``jax.random.categorical(key)`` for Discrete, and N(mean, exp(log_std)²) for Box."""
+    cat = ActorCritic(ActionSpace(True, 3), (8,))
+    q = cat.init(jax.random.PRNGKey(1), 4)
+    logits = jnp.tile(jnp.array([[1.0, 2.0, 0.5]]), (20_000, 1))
+    key = jax.random.PRNGKey(5)
+    drawn = cat.sample(q, logits, cat.noise(key, (20_000,)))
+    np.testing.assert_array_equal(drawn, jax.random.categorical(key, logits, axis=-1))
+    probs = np.exp([1.0, 2.0, 0.5]) / np.exp([1.0, 2.0, 0.5]).sum()
+    np.testing.assert_allclose(np.bincount(np.asarray(drawn), minlength=3) / 20_000, probs, atol=0.01)
+
+    box = ActorCritic(ActionSpace(False, 2, (-1.0, -1.0), (1.0, 1.0)), (8,))
+    p = box.init(jax.random.PRNGKey(1), 4)._replace(log_std=jnp.array([0.3, -0.5]))
+    actions = np.asarray(box.sample(p, jnp.zeros((20_000, 2)) + jnp.array([0.1, -0.2]), box.noise(key, (20_000,))))
+    np.testing.assert_allclose(actions.mean(0), [0.1, -0.2], atol=0.03)
+    np.testing.assert_allclose(actions.std(0), np.exp([0.3, -0.5]), rtol=0.03)
+
+
 def test_loss_uses_unbiased_advantage_std_and_clipping():
     """At the old policy the ratio is 1, so the policy loss is −mean of the normalized advantages (= 0) and the
     gradient of the normalized advantages uses torch's unbiased std."""
@@ -103,3 +121,32 @@ def test_loss_uses_unbiased_advantage_std_and_clipping():
     expected = -np.mean(np.minimum(norm * np.exp(0.5), norm * 1.2))
     assert float(m2["policy_loss"]) == pytest.approx(expected, rel=1e-5)
     assert float(m2["clip_fraction"]) == 1.0
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 64, 2048, 70_000])
+def test_permutation_is_a_permutation(n):
+    from ermrl.ppo.update import permutation
+
+    order = np.asarray(permutation(jax.random.PRNGKey(n), n))
+    assert order.dtype == np.int32 and sorted(order.tolist()) == list(range(n))
+    if n >= 64:
+        assert not np.array_equal(order, np.arange(n))
+
+
+def test_permutation_is_uniform():
+    """All 24 orderings of 4 rows equally likely, and at SB3's buffer size every row equally likely to land in
+    each of the 32 minibatches (chi-square tests on fixed keys, so the test is deterministic)."""
+    from scipy.stats import chisquare
+
+    from ermrl.ppo.update import permutation
+
+    keys = jax.random.split(jax.random.PRNGKey(0), 48_000)
+    small = np.asarray(jax.jit(jax.vmap(lambda k: permutation(k, 4)))(keys))
+    codes = small @ np.array([64, 16, 4, 1])
+    counts = np.unique(codes, return_counts=True)[1]
+    assert len(counts) == 24 and chisquare(counts).pvalue > 1e-3
+
+    big = np.asarray(jax.jit(jax.vmap(lambda k: permutation(k, 2048)))(keys[:4000]))
+    for row in (0, 1, 2047):
+        minibatch = np.argmax(big == row, axis=1) // 64
+        assert chisquare(np.bincount(minibatch, minlength=32)).pvalue > 1e-3

@@ -40,6 +40,14 @@ class Transition(NamedTuple):
     """(obs_dim,) masked observation reached by this step, before any reset."""
 
 
+class Restart(NamedTuple):
+    """Where an env starts again if a step ends its episode: gymnax's reset output, drawn ahead."""
+
+    obs: jax.Array
+    """(raw obs_dim,) unmasked observation."""
+    state: Any
+
+
 class JaxEnv:
     """A gymnax env with velocity masking. ``reset`` and ``step`` are pure and vmappable."""
 
@@ -72,15 +80,30 @@ class JaxEnv:
         obs, state = self._env.reset(key, self._params)
         return self.info.mask(obs.astype(jnp.float32)), state
 
-    def step(self, key: jax.Array, state: Any, action: jax.Array) -> Transition:
-        """Steps with an env action (an int for Discrete, a clipped (dim,) array for Box), auto-resetting."""
-        obs, state, reward, terminated, truncated, extra = self._env.step(key, state, action, self._params)
-        truncated = jnp.logical_and(truncated, jnp.logical_not(terminated))
+    def draw(self, key: jax.Array) -> tuple[jax.Array, Restart]:
+        """The randomness of one ``step(key, ...)``, drawn ahead: gymnax splits a step's key into one for the
+        dynamics and one for the reset that follows if the episode ends. Returns (dynamics key, Restart)."""
+        key_step, key_reset = jax.random.split(key)
+        return key_step, Restart(*self._env.reset_env(key_reset, self._params))
+
+    def step_from(self, key_step: jax.Array, state: Any, action: jax.Array, restart: Restart) -> Transition:
+        """:meth:`step` with its randomness drawn ahead by :meth:`draw`: the env steps and, if the episode
+        ended, starts again from ``restart``. Same result as ``step(key, ...)`` for ``draw(key)``."""
+        obs, next_state, reward, terminated, _ = self._env.step_env(key_step, state, action, self._params)
+        time_limit = self._env.is_truncated(next_state, self._params)
+        done = jnp.logical_or(terminated, time_limit)
+        pick = lambda reset_leaf, step_leaf: jax.lax.select(done, reset_leaf, step_leaf)
         return Transition(
-            obs=self.info.mask(obs.astype(jnp.float32)),
-            state=state,
+            obs=self.info.mask(pick(restart.obs, obs).astype(jnp.float32)),
+            state=jax.tree.map(pick, restart.state, next_state),
             reward=jnp.asarray(reward, jnp.float32).reshape(()),
             terminated=jnp.asarray(terminated).reshape(()),
-            truncated=jnp.asarray(truncated).reshape(()),
-            final_obs=self.info.mask(extra["final_observation"].astype(jnp.float32)),
+            truncated=jnp.logical_and(time_limit, jnp.logical_not(terminated)).reshape(()),
+            final_obs=self.info.mask(obs.astype(jnp.float32)),
         )
+
+    def step(self, key: jax.Array, state: Any, action: jax.Array) -> Transition:
+        """Steps with an env action (an int for Discrete, a clipped (dim,) array for Box), auto-resetting
+        as gymnax's ``step`` does."""
+        key_step, restart = self.draw(key)
+        return self.step_from(key_step, state, action, restart)

@@ -81,11 +81,20 @@ class ActorCritic:
         """(..., policy_dim): logits (Discrete) or Gaussian means (Box)."""
         return self.actor.apply(params.actor, context)
 
-    def sample(self, params: PolicyParams, head: jax.Array, key: jax.Array) -> jax.Array:
-        """An action per row: int32 (...,) for Discrete, float32 (..., dim) for Box (unclipped)."""
+    def noise(self, key: jax.Array, batch_shape: tuple[int, ...]) -> jax.Array:
+        """(*batch_shape, policy_dim) float32 sampling noise: Gumbel for Discrete (the Gumbel-max trick of
+        ``jax.random.categorical``), standard normal for Box. Drawn apart from :meth:`sample` so that a
+        rollout can draw all its steps' noise in one batched call."""
+        shape = (*batch_shape, self.action.policy_dim)
         if self.action.discrete:
-            return jax.random.categorical(key, head, axis=-1)
-        noise = jax.random.normal(key, head.shape, head.dtype)
+            return jax.random.gumbel(key, shape, jnp.float32)
+        return jax.random.normal(key, shape, jnp.float32)
+
+    def sample(self, params: PolicyParams, head: jax.Array, noise: jax.Array) -> jax.Array:
+        """An action per row from :meth:`noise`'s draw: int32 (...,) for Discrete (the same action as
+        ``jax.random.categorical`` with that key), float32 (..., dim) for Box (unclipped)."""
+        if self.action.discrete:
+            return jnp.argmax(noise + head, axis=-1).astype(jnp.int32)
         return head + jnp.exp(params.log_std) * noise
 
     def log_prob(self, params: PolicyParams, head: jax.Array, action: jax.Array) -> jax.Array:
