@@ -63,21 +63,22 @@ class HostIteration:
         self.step_like: Step | None = None
 
         def begin(key):
+            """(next key, action noise (n_steps, n_envs, policy_dim), update key): the JAX backend's keys."""
             key, k_roll, k_update = jax.random.split(key, 3)
-            return key, jax.random.split(k_roll, ppo.n_steps), k_update
+            k_act = jax.vmap(lambda k: jax.random.split(k)[0])(jax.random.split(k_roll, ppo.n_steps))
+            return key, jax.vmap(lambda k: net.noise(k, (ppo.n_envs,)))(k_act), k_update
 
-        def choose(params, context, step_key) -> Act:
-            k_act = jax.random.split(step_key)[0]  # as on the JAX backend
-            return act(net, params, context, net.noise(k_act, context.shape[:1]))
+        def choose(params, context, noise) -> Act:
+            return act(net, params, context, noise)
 
         def advance_packed(res, carry, chosen, packed):
             out = Stepped.unpack(packed, d)
             tr = Transition(out.obs, carry.env_state, out.reward, out.terminated, out.truncated, out.final_obs)
             return advance(agent, res, carry, chosen, tr)
 
-        def advance_choose(params, res, carry, chosen, packed, step_key):
+        def advance_choose(params, res, carry, chosen, packed, noise):
             carry, step = advance_packed(res, carry, chosen, packed)
-            return carry, pack_step(step), choose(params, carry.context, step_key)
+            return carry, pack_step(step), choose(params, carry.context, noise)
 
         def advance_last(res, carry, chosen, packed):
             carry, step = advance_packed(res, carry, chosen, packed)
@@ -93,19 +94,19 @@ class HostIteration:
         self._advance_shape = jax.vmap(advance_packed)
         self._learn = jax.jit(learn_packed, donate_argnums=0)
 
-    def rollout(self, params, res, carry: EnvCarry, step_keys: np.ndarray) -> tuple[EnvCarry, np.ndarray]:
-        """n_steps steps of every agent. step_keys (n_steps, A, 2). Returns the final carry (on ``device``)
+    def rollout(self, params, res, carry: EnvCarry, noise: np.ndarray) -> tuple[EnvCarry, np.ndarray]:
+        """n_steps steps of every agent. noise (n_steps, A, n_envs, policy_dim), drawn ahead. Returns the final carry (on ``device``)
         and the packed steps, (A, n_steps, n_envs, width) float32."""
         n_steps = self.ppo.n_steps
         space = self.env.info.action
         buffer = None
-        chosen = self._choose(params, carry.context, step_keys[0])
+        chosen = self._choose(params, carry.context, noise[0])
         for t in range(n_steps):
             actions = np.asarray(chosen.env_action)
             packed = self.env.step(actions.reshape((-1,) if space.discrete else (-1, space.dim)))
             packed = packed.reshape(actions.shape[:2] + packed.shape[1:])
             if t + 1 < n_steps:
-                carry, step, chosen = self._advance_choose(params, res, carry, chosen, packed, step_keys[t + 1])
+                carry, step, chosen = self._advance_choose(params, res, carry, chosen, packed, noise[t + 1])
             else:
                 carry, step = self._advance_last(res, carry, chosen, packed)
             if buffer is None:
@@ -115,18 +116,18 @@ class HostIteration:
 
     def _start(self, state):
         """Keys for the iteration, and the rollout's inputs on ``device``: (next key, params, reservoirs,
-        carry, step keys (n_steps, A, 2) NumPy, update key)."""
-        key, step_keys, k_update = self._begin(jax.device_put(state.key, self.device))
+        carry, action noise (n_steps, A, n_envs, policy_dim) NumPy, update key)."""
+        key, noise, k_update = self._begin(jax.device_put(state.key, self.device))
         params, res, carry = jax.device_put((state.learner.params, state.reservoirs, state.envs), self.device)
-        return key, params, res, carry, np.ascontiguousarray(np.asarray(step_keys).swapaxes(0, 1)), k_update
+        return key, params, res, carry, np.ascontiguousarray(np.asarray(noise).swapaxes(0, 1)), k_update
 
     def warm_up(self, state):
         """Compiles every function for ``state``'s shapes without stepping any env."""
-        _, params, res, carry, step_keys, k_update = self._start(state)
-        chosen = self._choose(params, carry.context, step_keys[0])
+        _, params, res, carry, noise, k_update = self._start(state)
+        chosen = self._choose(params, carry.context, noise[0])
         packed = np.zeros(carry.context.shape[:2] + (2 * self.env.info.obs_dim + 3,), np.float32)
         _, self.step_like = jax.eval_shape(self._advance_shape, res, carry, chosen, packed)
-        self._advance_choose(params, res, carry, chosen, packed, step_keys[min(1, self.ppo.n_steps - 1)])
+        self._advance_choose(params, res, carry, chosen, packed, noise[min(1, self.ppo.n_steps - 1)])
         final, step = self._advance_last(res, carry, chosen, packed)
         size, n_envs, width = step.shape
         steps = jax.ShapeDtypeStruct((size, self.ppo.n_steps, n_envs, width), jnp.float32, sharding=self.sharding)
@@ -138,8 +139,8 @@ class HostIteration:
     def collect(self, state):
         """The rollout half of an iteration. Returns (next key, final carry, packed steps
         (A, n_steps, n_envs, width) NumPy, update key); ``unpack_steps(steps, self.step_like)`` reads them."""
-        key, params, res, carry, step_keys, k_update = self._start(state)
-        carry, steps = self.rollout(params, res, carry, step_keys)
+        key, params, res, carry, noise, k_update = self._start(state)
+        carry, steps = self.rollout(params, res, carry, noise)
         return key, carry, steps, k_update
 
     def __call__(self, state):
