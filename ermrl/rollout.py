@@ -122,7 +122,9 @@ def collect(
     """Runs n_steps steps in each env. Returns the final carry and the stacked steps (n_steps, n_envs, ...)."""
     n_envs = carry.context.shape[0]
     # Every step's randomness is drawn before the scan, in a few batched calls: XLA:CPU runs each threefry call
-    # as a small loop of its own, and five of them per step cost more than the rest of the step.
+    # as a small loop of its own, and five of them per step cost more than the rest of the step. The draws are
+    # the ones a per-step split would give: noise (n_steps, n_envs, policy_dim), key_step (n_steps, n_envs, 2),
+    # restart fields (n_steps, n_envs, ...).
     k_act, k_env = jnp.moveaxis(jax.vmap(jax.random.split)(jax.random.split(key, n_steps)), 1, 0)
     noise = jax.vmap(lambda k: net.noise(k, (n_envs,)))(k_act)
     key_step, restart = jax.vmap(lambda k: jax.vmap(env.draw)(jax.random.split(k, n_envs)))(k_env)
