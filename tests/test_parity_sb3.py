@@ -67,3 +67,82 @@ def test_ppo_learns_like_sb3(env_id):
         assert within_15 or inside_spread, f"{env_id} at {t}: ermrl {a.mean():.1f}±{a.std():.1f} vs sb3 {b.mean():.1f}±{b.std():.1f}"
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps(record, indent=1))
+
+
+def _sb3_dense(state: dict, names: list[str]) -> dict:
+    """SB3 Linear layers (weight (out, in)) as our flax Dense params (kernel (in, out))."""
+    import jax.numpy as jnp
+
+    return {"params": {f"Dense_{i}": {"kernel": jnp.asarray(state[f"{n}.weight"].T), "bias": jnp.asarray(state[f"{n}.bias"])}
+                       for i, n in enumerate(names)}}
+
+
+def _sb3_one_update(env_id: str, sgd: bool) -> tuple[dict, dict, object]:
+    """SB3 PPO with seed 0: one 2048-step rollout, then one full-batch update (n_epochs=1, batch 2048).
+    With ``sgd`` the optimizer is plain SGD, so the step is −lr × the clipped gradient. Returns the policy's
+    state before and after (NumPy) and the rollout buffer."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import PPO
+
+    torch.set_num_threads(1)
+    model = PPO("MlpPolicy", gym.make(env_id), seed=0, n_epochs=1, batch_size=2048)
+    if sgd:
+        model.policy.optimizer = torch.optim.SGD(model.policy.parameters(), lr=model.learning_rate)
+    before = {k: v.detach().clone().numpy() for k, v in model.policy.state_dict().items()}
+    model.learn(2048)
+    return before, {k: v.detach().numpy() for k, v in model.policy.state_dict().items()}, model.rollout_buffer
+
+
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "Pendulum-v1"])
+def test_one_update_matches_sb3(env_id):
+    """Same weights, same rollout buffer (SB3's, seed 0):
+    - our log-probs and values equal SB3's;
+    - the loss gradient after global-norm clipping equals SB3's (SB3 run with plain SGD, so its step is
+      −lr × its clipped gradient); this checks the clipped surrogate, the advantage normalization, vf_coef and
+      the clipping, which Adam's first step would hide (it is ≈ ±lr whatever the gradient's scale);
+    - one full-batch update with Adam moves every parameter as SB3's ``train()`` does."""
+    import jax
+    import jax.numpy as jnp
+    import optax
+
+    from ermrl import envs
+    from ermrl.ppo import update as ppo_update
+    from ermrl.ppo.config import PPOConfig
+    from ermrl.ppo.losses import Batch, ppo_loss
+    from ermrl.ppo.networks import ActorCritic, PolicyParams
+
+    def ours_from(state):
+        return PolicyParams(
+            actor=_sb3_dense(state, ["mlp_extractor.policy_net.0", "mlp_extractor.policy_net.2", "action_net"]),
+            critic=_sb3_dense(state, ["mlp_extractor.value_net.0", "mlp_extractor.value_net.2", "value_net"]),
+            log_std=jnp.asarray(state["log_std"]) if "log_std" in state else None,
+        )
+
+    def assert_same_steps(ours_after, sb3_after, start):
+        for a, b, s in zip(*(jax.tree.leaves(p) for p in (ours_after, sb3_after, start))):
+            sb3_step = np.asarray(b - s)
+            np.testing.assert_allclose(np.asarray(a - s), sb3_step, atol=1e-3 * np.abs(sb3_step).max() + 1e-9)
+
+    info = envs.describe(env_id)
+    net = ActorCritic(info.action, (64, 64))
+    config = PPOConfig(n_epochs=1, batch_size=2048)
+    lr = jnp.float32(config.learning_rate)
+    before, after_adam, buf = _sb3_one_update(env_id, sgd=False)
+    params = ours_from(before)
+    obs = jnp.asarray(buf.observations.reshape(2048, -1))
+    action = jnp.asarray(buf.actions.reshape(2048).astype(np.int32) if info.action.discrete else buf.actions.reshape(2048, -1))
+    head = net.head(params, obs)
+    np.testing.assert_allclose(net.log_prob(params, head, action), buf.log_probs.reshape(-1), atol=1e-5)
+    np.testing.assert_allclose(net.value(params, obs), buf.values.reshape(-1), rtol=1e-5, atol=1e-5)
+    batch = Batch(obs, action, *(jnp.asarray(x.reshape(-1)) for x in (buf.log_probs, buf.advantages, buf.returns)))
+
+    sgd_before, after_sgd, sgd_buf = _sb3_one_update(env_id, sgd=True)
+    np.testing.assert_array_equal(sgd_buf.actions, buf.actions)  # same seed: same weights and rollout
+    grads = jax.grad(lambda p: ppo_loss(p, net, batch, config)[0])(params)
+    clipped, _ = optax.clip_by_global_norm(config.max_grad_norm).update(grads, optax.EmptyState())
+    assert_same_steps(jax.tree.map(lambda p, g: p - lr * g, params, clipped), ours_from(after_sgd), params)
+
+    learner = ppo_update.LearnerState(params, ppo_update.make_optimizer(config).init(params), lr)
+    learner, _ = ppo_update.update(learner, batch, jax.random.PRNGKey(0), net, config)
+    assert_same_steps(learner.params, ours_from(after_adam), params)
