@@ -77,31 +77,38 @@ def _sb3_dense(state: dict, names: list[str]) -> dict:
                        for i, n in enumerate(names)}}
 
 
-def _sb3_one_update(env_id: str, sgd: bool) -> tuple[dict, dict, object]:
-    """SB3 PPO with seed 0: one 2048-step rollout, then one full-batch update (n_epochs=1, batch 2048).
-    With ``sgd`` the optimizer is plain SGD, so the step is −lr × the clipped gradient. Returns the policy's
-    state before and after (NumPy) and the rollout buffer."""
+def _sb3_one_iteration(env_id: str, monkeypatch, orders=None, sgd=False, **ppo_kwargs) -> tuple[dict, dict, object]:
+    """SB3 PPO("MlpPolicy", seed=0): one 2048-step rollout, then one ``train()`` on it. With ``orders``
+    (n_epochs, 2048), the epochs shuffle the buffer in those orders; with ``sgd`` the optimizer is plain SGD,
+    so a step is −lr × the clipped gradient. Returns the policy's state before and
+    after (NumPy) and the rollout buffer (flattened to (2048, ...) rows by ``train()``)."""
     import gymnasium as gym
     import torch
     from stable_baselines3 import PPO
 
     torch.set_num_threads(1)
-    model = PPO("MlpPolicy", gym.make(env_id), seed=0, n_epochs=1, batch_size=2048)
+    model = PPO("MlpPolicy", gym.make(env_id), seed=0, **ppo_kwargs)
     if sgd:
         model.policy.optimizer = torch.optim.SGD(model.policy.parameters(), lr=model.learning_rate)
     before = {k: v.detach().clone().numpy() for k, v in model.policy.state_dict().items()}
-    model.learn(2048)
+    with monkeypatch.context() as patch:
+        if orders is not None:
+            given, real = iter(orders), np.random.permutation
+            patch.setattr(np.random, "permutation", lambda n: np.array(next(given)) if n == len(orders[0]) else real(n))
+        model.learn(2048)
     return before, {k: v.detach().numpy() for k, v in model.policy.state_dict().items()}, model.rollout_buffer
 
 
 @pytest.mark.parametrize("env_id", ["CartPole-v1", "Pendulum-v1"])
-def test_one_update_matches_sb3(env_id):
+def test_update_matches_sb3(env_id, monkeypatch):
     """Same weights, same rollout buffer (SB3's, seed 0):
     - our log-probs and values equal SB3's;
-    - the loss gradient after global-norm clipping equals SB3's (SB3 run with plain SGD, so its step is
-      −lr × its clipped gradient); this checks the clipped surrogate, the advantage normalization, vf_coef and
-      the clipping, which Adam's first step would hide (it is ≈ ±lr whatever the gradient's scale);
-    - one full-batch update with Adam moves every parameter as SB3's ``train()`` does."""
+    - the loss gradient after global-norm clipping equals SB3's (SB3 run once with plain SGD on the full batch,
+      so its step is −lr × its clipped gradient); this checks the clipped surrogate, the advantage
+      normalization, vf_coef and the clipping, which Adam would hide (its first step is ≈ ±lr whatever the
+      gradient's scale);
+    - a whole SB3-default update (10 epochs × 32 minibatches of 64, Adam), with both sides shuffling in the
+      same orders, moves every parameter as SB3's ``train()`` does."""
     import jax
     import jax.numpy as jnp
     import optax
@@ -126,9 +133,10 @@ def test_one_update_matches_sb3(env_id):
 
     info = envs.describe(env_id)
     net = ActorCritic(info.action, (64, 64))
-    config = PPOConfig(n_epochs=1, batch_size=2048)
+    config = PPOConfig()
     lr = jnp.float32(config.learning_rate)
-    before, after_adam, buf = _sb3_one_update(env_id, sgd=False)
+    orders = np.stack([np.random.default_rng(e).permutation(config.buffer_size) for e in range(config.n_epochs)])
+    before, after, buf = _sb3_one_iteration(env_id, monkeypatch, orders)
     params = ours_from(before)
     obs = jnp.asarray(buf.observations.reshape(2048, -1))
     action = jnp.asarray(buf.actions.reshape(2048).astype(np.int32) if info.action.discrete else buf.actions.reshape(2048, -1))
@@ -137,12 +145,13 @@ def test_one_update_matches_sb3(env_id):
     np.testing.assert_allclose(net.value(params, obs), buf.values.reshape(-1), rtol=1e-5, atol=1e-5)
     batch = Batch(obs, action, *(jnp.asarray(x.reshape(-1)) for x in (buf.log_probs, buf.advantages, buf.returns)))
 
-    sgd_before, after_sgd, sgd_buf = _sb3_one_update(env_id, sgd=True)
-    np.testing.assert_array_equal(sgd_buf.actions, buf.actions)  # same seed: same weights and rollout
-    grads = jax.grad(lambda p: ppo_loss(p, net, batch, config)[0])(params)
-    clipped, _ = optax.clip_by_global_norm(config.max_grad_norm).update(grads, optax.EmptyState())
-    assert_same_steps(jax.tree.map(lambda p, g: p - lr * g, params, clipped), ours_from(after_sgd), params)
-
     learner = ppo_update.LearnerState(params, ppo_update.make_optimizer(config).init(params), lr)
-    learner, _ = ppo_update.update(learner, batch, jax.random.PRNGKey(0), net, config)
-    assert_same_steps(learner.params, ours_from(after_adam), params)
+    learner, _ = ppo_update.update(learner, batch, jax.random.PRNGKey(0), net, config, orders=orders)
+    assert_same_steps(learner.params, ours_from(after), params)
+
+    _, after_sgd, sgd_buf = _sb3_one_iteration(env_id, monkeypatch, None, n_epochs=1, batch_size=2048, sgd=True)
+    np.testing.assert_array_equal(sgd_buf.actions, buf.actions)  # same seed: same weights and rollout
+    full = PPOConfig(n_epochs=1, batch_size=2048)
+    grads = jax.grad(lambda p: ppo_loss(p, net, batch, full)[0])(params)
+    clipped, _ = optax.clip_by_global_norm(full.max_grad_norm).update(grads, optax.EmptyState())
+    assert_same_steps(jax.tree.map(lambda p, g: p - lr * g, params, clipped), ours_from(after_sgd), params)

@@ -60,8 +60,13 @@ def permutation(key: jax.Array, n: int) -> jax.Array:
     return first[second].astype(jnp.int32)
 
 
-def update(learner: LearnerState, batch: Batch, key: jax.Array, net: ActorCritic, config: PPOConfig):
-    """Runs the epochs over ``batch`` (rows (B, ...)). Returns (learner, metrics averaged over minibatches)."""
+def update(learner: LearnerState, batch: Batch, key: jax.Array, net: ActorCritic, config: PPOConfig,
+           orders: jax.Array | None = None):
+    """Runs the epochs over ``batch`` (rows (B, ...)). Returns (learner, metrics averaged over minibatches).
+
+    Each epoch visits the rows in a fresh :func:`permutation` drawn from ``key``, split into minibatches of
+    ``batch_size``. ``orders`` (n_epochs, B) int32 gives those orders instead (to replay another library's
+    shuffles, as the SB3 parity test does)."""
     optimizer = make_optimizer(config)
     grad_fn = jax.value_and_grad(ppo_loss, has_aux=True)
 
@@ -73,9 +78,10 @@ def update(learner: LearnerState, batch: Batch, key: jax.Array, net: ActorCritic
         metrics["grad_norm"] = optax.tree.norm(grads)
         return LearnerState(params, opt_state, learner.learning_rate), metrics
 
-    def epoch(learner: LearnerState, epoch_key: jax.Array):
-        order = permutation(epoch_key, config.buffer_size)
+    def epoch(learner: LearnerState, order: jax.Array):
         return jax.lax.scan(minibatch_step, learner, order.reshape(config.n_minibatches, config.batch_size))
 
-    learner, metrics = jax.lax.scan(epoch, learner, jax.random.split(key, config.n_epochs))
+    if orders is None:
+        orders = jax.vmap(lambda k: permutation(k, config.buffer_size))(jax.random.split(key, config.n_epochs))
+    learner, metrics = jax.lax.scan(epoch, learner, jnp.asarray(orders, jnp.int32))
     return learner, jax.tree.map(jnp.mean, metrics)
