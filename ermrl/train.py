@@ -23,7 +23,7 @@ from ermrl.errors import ConfigError
 from ermrl.host_loop import HostIteration
 from ermrl.ppo import update as ppo_update
 from ermrl.ppo.config import PPOConfig
-from ermrl.ppo.losses import Batch, gae
+from ermrl.ppo.losses import Batch, bootstrapped_gae
 from ermrl.ppo.networks import ActorCritic
 from ermrl.results import Results
 from ermrl.envs import HostEnv, JaxEnv
@@ -153,9 +153,9 @@ def make_agent_fns(config: TrainConfig) -> AgentFns:
 
     def learn(state: AgentState, carry: EnvCarry, steps: Step, k_update) -> tuple[AgentState, IterationLog]:
         params = state.learner.params
-        final_value = net.value(params, steps.final_context)
-        reward = steps.reward + ppo.gamma * final_value * steps.truncated
-        advantage, ret = gae(reward, steps.value, steps.done, net.value(params, carry.context), ppo.gamma, ppo.gae_lambda)
+        advantage, ret = bootstrapped_gae(steps.reward, steps.value, steps.done, steps.truncated,
+                                          net.value(params, steps.final_context), net.value(params, carry.context),
+                                          ppo.gamma, ppo.gae_lambda)
         flat = lambda x: x.reshape((ppo.buffer_size,) + x.shape[2:])
         batch = Batch(flat(steps.context), flat(steps.action), flat(steps.log_prob), flat(advantage), flat(ret))
         learner, metrics = ppo_update.update(state.learner, batch, k_update, net, ppo)

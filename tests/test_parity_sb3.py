@@ -77,6 +77,19 @@ def _sb3_dense(state: dict, names: list[str]) -> dict:
                        for i, n in enumerate(names)}}
 
 
+def _ours_from(state: dict):
+    """An SB3 MlpPolicy state dict as our PolicyParams."""
+    import jax.numpy as jnp
+
+    from ermrl.ppo.networks import PolicyParams
+
+    return PolicyParams(
+        actor=_sb3_dense(state, ["mlp_extractor.policy_net.0", "mlp_extractor.policy_net.2", "action_net"]),
+        critic=_sb3_dense(state, ["mlp_extractor.value_net.0", "mlp_extractor.value_net.2", "value_net"]),
+        log_std=jnp.asarray(state["log_std"]) if "log_std" in state else None,
+    )
+
+
 def _sb3_one_iteration(env_id: str, monkeypatch, orders=None, sgd=False, **ppo_kwargs) -> tuple[dict, dict, object]:
     """SB3 PPO("MlpPolicy", seed=0): one 2048-step rollout, then one ``train()`` on it. With ``orders``
     (n_epochs, 2048), the epochs shuffle the buffer in those orders; with ``sgd`` the optimizer is plain SGD,
@@ -117,14 +130,7 @@ def test_update_matches_sb3(env_id, monkeypatch):
     from ermrl.ppo import update as ppo_update
     from ermrl.ppo.config import PPOConfig
     from ermrl.ppo.losses import Batch, ppo_loss
-    from ermrl.ppo.networks import ActorCritic, PolicyParams
-
-    def ours_from(state):
-        return PolicyParams(
-            actor=_sb3_dense(state, ["mlp_extractor.policy_net.0", "mlp_extractor.policy_net.2", "action_net"]),
-            critic=_sb3_dense(state, ["mlp_extractor.value_net.0", "mlp_extractor.value_net.2", "value_net"]),
-            log_std=jnp.asarray(state["log_std"]) if "log_std" in state else None,
-        )
+    from ermrl.ppo.networks import ActorCritic
 
     def assert_same_steps(ours_after, sb3_after, start):
         for a, b, s in zip(*(jax.tree.leaves(p) for p in (ours_after, sb3_after, start))):
@@ -137,7 +143,7 @@ def test_update_matches_sb3(env_id, monkeypatch):
     lr = jnp.float32(config.learning_rate)
     orders = np.stack([np.random.default_rng(e).permutation(config.buffer_size) for e in range(config.n_epochs)])
     before, after, buf = _sb3_one_iteration(env_id, monkeypatch, orders)
-    params = ours_from(before)
+    params = _ours_from(before)
     obs = jnp.asarray(buf.observations.reshape(2048, -1))
     action = jnp.asarray(buf.actions.reshape(2048).astype(np.int32) if info.action.discrete else buf.actions.reshape(2048, -1))
     head = net.head(params, obs)
@@ -147,11 +153,52 @@ def test_update_matches_sb3(env_id, monkeypatch):
 
     learner = ppo_update.LearnerState(params, ppo_update.make_optimizer(config).init(params), lr)
     learner, _ = ppo_update.update(learner, batch, jax.random.PRNGKey(0), net, config, orders=orders)
-    assert_same_steps(learner.params, ours_from(after), params)
+    assert_same_steps(learner.params, _ours_from(after), params)
 
     _, after_sgd, sgd_buf = _sb3_one_iteration(env_id, monkeypatch, None, n_epochs=1, batch_size=2048, sgd=True)
     np.testing.assert_array_equal(sgd_buf.actions, buf.actions)  # same seed: same weights and rollout
     full = PPOConfig(n_epochs=1, batch_size=2048)
     grads = jax.grad(lambda p: ppo_loss(p, net, batch, full)[0])(params)
     clipped, _ = optax.clip_by_global_norm(full.max_grad_norm).update(grads, optax.EmptyState())
-    assert_same_steps(jax.tree.map(lambda p, g: p - lr * g, params, clipped), ours_from(after_sgd), params)
+    assert_same_steps(jax.tree.map(lambda p, g: p - lr * g, params, clipped), _ours_from(after_sgd), params)
+
+
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "Pendulum-v1"])
+def test_rollout_targets_match_sb3(env_id, monkeypatch):
+    """SB3's rollout (seed 0) replayed in a plain Gymnasium env: our time-limit bootstrap and GAE
+    (``bootstrapped_gae``, what ``learn`` uses) give SB3's advantages and returns. Pendulum's 2048 steps hold
+    10 time-limit truncations."""
+    import gymnasium as gym
+    import jax.numpy as jnp
+
+    from ermrl import envs
+    from ermrl.ppo.config import PPOConfig
+    from ermrl.ppo.losses import bootstrapped_gae
+    from ermrl.ppo.networks import ActorCritic
+
+    before, _, buf = _sb3_one_iteration(env_id, monkeypatch)
+    info = envs.describe(env_id)
+    obs, actions = buf.observations.reshape(2048, -1), buf.actions.reshape(2048, -1)
+    low, high = info.action.low, info.action.high
+    env = gym.make(env_id)
+    o, _ = env.reset(seed=0)  # SB3's seed=0 seeds the env's first reset
+    reward, terminated, truncated = np.zeros(2048, np.float32), np.zeros(2048, bool), np.zeros(2048, bool)
+    final = np.zeros_like(obs)
+    for t in range(2048):
+        np.testing.assert_allclose(o, obs[t], atol=1e-5)
+        a = int(actions[t, 0]) if info.action.discrete else np.clip(actions[t], *(np.float32(b) for b in (low, high)))
+        final[t], reward[t], terminated[t], truncated[t], _ = env.step(a)
+        o = env.reset()[0] if terminated[t] or truncated[t] else final[t]
+    if env_id == "Pendulum-v1":
+        assert truncated.sum() == 10
+
+    net, ppo = ActorCritic(info.action, (64, 64)), PPOConfig()
+    params = _ours_from(before)
+    column = lambda x: jnp.asarray(x).reshape(2048, 1)
+    advantage, ret = bootstrapped_gae(
+        column(reward), column(buf.values), column(terminated | truncated), column(truncated & ~terminated),
+        net.value(params, jnp.asarray(final))[:, None], net.value(params, jnp.asarray(o)[None]), ppo.gamma,
+        ppo.gae_lambda)
+    scale = np.abs(buf.advantages).max()
+    np.testing.assert_allclose(advantage[:, 0], buf.advantages.reshape(-1), atol=1e-5 * scale)
+    np.testing.assert_allclose(ret[:, 0], buf.returns.reshape(-1), atol=1e-5 * np.abs(buf.returns).max())

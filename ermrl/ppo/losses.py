@@ -46,6 +46,16 @@ def gae(reward, value, done, last_value, gamma: float, lam: float):
     return adv, adv + value
 
 
+def bootstrapped_gae(reward, value, done, truncated, final_value, last_value, gamma: float, lam: float):
+    """Advantages and returns of a rollout as SB3 computes them, time limits included.
+
+    On a time-limit truncation SB3's ``collect_rollouts`` adds γ·V(final observation) to the step's reward
+    (the episode did not really end); then :func:`gae` treats every episode end alike. reward, value, done,
+    truncated, final_value: (T, n_envs), final_value being V of the context built from the step's final
+    observation. last_value: (n_envs,). Returns (advantage, return), each (T, n_envs)."""
+    return gae(reward + gamma * final_value * truncated, value, done, last_value, gamma, lam)
+
+
 def ppo_loss(params: PolicyParams, net: ActorCritic, batch: Batch, config: PPOConfig):
     """Clipped surrogate + vf_coef·MSE − ent_coef·entropy on one minibatch. Returns (loss, metrics)."""
     head = net.head(params, batch.context)
