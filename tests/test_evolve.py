@@ -70,25 +70,29 @@ def test_extreme_but_valid_phi_stays_finite():
 
 
 def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path):
-    args = ["evolve", "--env", "CartPoleNoVel-v1", "--trials", "12", "--seeds", "2", "--timesteps", "30720",
+    args = ["evolve", "--env", "CartPoleNoVel-v1", "--trials", "12", "--seeds", "2", "--timesteps", "61440",
             "--fixed-iss", "1.0", "--study", "r", "--out", str(tmp_path), "--quiet", "--no-estimate"]
     proc = subprocess.Popen([sys.executable, "-m", "ermrl.cli", *args], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     url = f"sqlite:///{tmp_path}/study.db"
-    first = []
+    first, seen = [], []
     deadline = time.time() + 600
     while time.time() < deadline and proc.poll() is None:
-        time.sleep(0.3)
+        time.sleep(0.1)
         try:
             trials = load_study(url, "r").trials
-        except Exception:
+        except Exception:  # the database is created or written to right now
             continue
-        if sum(t.state == TrialState.COMPLETE for t in trials) >= 6 and any(t.state == TrialState.RUNNING for t in trials):
+        counts = (sum(t.state == TrialState.COMPLETE for t in trials), sum(t.state == TrialState.RUNNING for t in trials))
+        seen.append(counts)
+        # Kill while generation 1 trains: generation 0 told, generation 1 asked and not yet told (its tells come
+        # in a burst at the end, so 7-11 complete means the window has passed).
+        if counts[0] == 6 and counts[1] > 0:
             first = [(t.number, t.value) for t in trials if t.state == TrialState.COMPLETE]
             proc.send_signal(signal.SIGKILL)
             break
     proc.wait()
-    assert len(first) == 6, "the first run was not caught mid-generation"
+    assert len(first) == 6, f"the first run was not caught mid-generation; (complete, running) seen: {seen[-20:]}"
     r = cli(*args)
     assert r.returncode == 0, r.stderr
     trials = load_study(url, "r").trials
