@@ -95,8 +95,8 @@ class HostIteration:
         self._learn = jax.jit(learn_packed, donate_argnums=0)
 
     def rollout(self, params, res, carry: EnvCarry, noise: np.ndarray) -> tuple[EnvCarry, np.ndarray]:
-        """n_steps steps of every agent. noise (n_steps, A, n_envs, policy_dim), drawn ahead. Returns the final carry (on ``device``)
-        and the packed steps, (A, n_steps, n_envs, width) float32."""
+        """n_steps steps of every agent, with action noise (n_steps, A, n_envs, policy_dim) drawn ahead.
+        Returns the final carry (on ``device``) and the packed steps, (A, n_steps, n_envs, width) float32."""
         n_steps = self.ppo.n_steps
         space = self.env.info.action
         buffer = None
