@@ -25,7 +25,7 @@ from ermrl.envs.host_backend import HostEnv
 from ermrl.envs.host_groups import Stepped
 from ermrl.envs.jax_backend import Transition
 from ermrl.ppo.config import PPOConfig
-from ermrl.rollout import Act, EnvCarry, Step, act, advance
+from ermrl.rollout import EnvCarry, Step, act, advance
 
 
 def pack_step(step: Step) -> jax.Array:
@@ -68,8 +68,7 @@ class HostIteration:
             k_act = jax.vmap(lambda k: jax.random.split(k)[0])(jax.random.split(k_roll, ppo.n_steps))
             return key, jax.vmap(lambda k: net.noise(k, (ppo.n_envs,)))(k_act), k_update
 
-        def choose(params, context, noise) -> Act:
-            return act(net, params, context, noise)
+        choose = functools.partial(act, net)  # (params, context, noise) -> Act
 
         def advance_packed(res, carry, chosen, packed):
             out = Stepped.unpack(packed, d)
