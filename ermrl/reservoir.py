@@ -23,6 +23,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ermrl.errors import ConfigError
+
 
 @dataclasses.dataclass(frozen=True)
 class ReservoirSpec:
@@ -41,13 +43,13 @@ class ReservoirSpec:
 
     def __post_init__(self):
         if self.units < 1:
-            raise ValueError(f"units must be >= 1, got {self.units}")
+            raise ConfigError(f"units must be >= 1, got {self.units}; a reservoir needs at least one neuron")
         for name in ("rc_connectivity", "input_connectivity"):
             value = getattr(self, name)
             if not 0.0 < value <= 1.0:
-                raise ValueError(f"{name} must be in (0, 1], got {value}")
+                raise ConfigError(f"{name} must be in (0, 1], got {value}")
         if self.bias not in ("bernoulli", "none"):
-            raise ValueError(f"bias must be 'bernoulli' or 'none', got {self.bias!r}")
+            raise ConfigError(f"bias must be 'bernoulli' or 'none', got {self.bias!r}")
 
 
 class ReservoirWeights(NamedTuple):

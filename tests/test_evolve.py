@@ -13,10 +13,12 @@ import pytest
 from optuna.trial import TrialState
 
 from ermrl.agent import AgentConfig, Phi
-from ermrl.evolve import EvolveConfig, evolve
-from ermrl.search_space import SearchSpace
-from ermrl.study import load_study, make_sampler, open_study
-from ermrl.train import Population, TrainConfig, train
+from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.evolve import evolve
+from ermrl.storage import encode_study_record
+from ermrl.evolution.search_space import SearchSpace
+from ermrl.evolution.study import load_study, make_sampler, open_study
+from ermrl.training import Population, TrainConfig, train
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -34,7 +36,7 @@ def tiny(trials, sampler="cmaes", popsize=None, space=SearchSpace(fixed_iss=1.0)
 def test_two_cmaes_generations_store_every_trial(tmp_path):
     config = tiny(trials=12)
     assert config.generation_size == 6  # CMA-ES default for 2 parameters: 4 + ⌊3 ln 2⌋
-    study = open_study(f"sqlite:///{tmp_path}/s.db", "s", make_sampler("cmaes", 6, 0), config.record())
+    study = open_study(f"sqlite:///{tmp_path}/s.db", "s", make_sampler("cmaes", 6, 0), encode_study_record(config))
     evolve(study, config)
     trials = study.trials
     assert [t.state for t in trials] == [TrialState.COMPLETE] * 12
@@ -51,7 +53,7 @@ def test_two_cmaes_generations_store_every_trial(tmp_path):
 
 def test_divergent_candidate_is_failed_and_the_study_goes_on(tmp_path):
     config = tiny(trials=4, sampler="random", popsize=4, space=SearchSpace())
-    study = open_study(f"sqlite:///{tmp_path}/s.db", "s", make_sampler("random", 4, 0), config.record())
+    study = open_study(f"sqlite:///{tmp_path}/s.db", "s", make_sampler("random", 4, 0), encode_study_record(config))
     with warnings.catch_warnings():  # a leak rate of 5 is outside the search space: x grows ×4 per step
         warnings.simplefilter("ignore", UserWarning)
         study.enqueue_trial({"sr": 1.0, "lr": 5.0, "iss": 1.0})
@@ -149,7 +151,7 @@ def test_test_and_report_need_an_existing_study(tmp_path):
 def test_journal_storage_persists_a_study(tmp_path):
     config = tiny(trials=1)
     url = str(tmp_path / "journal.log")
-    study = open_study(url, "j", make_sampler("random", 6, 0), config.record())
+    study = open_study(url, "j", make_sampler("random", 6, 0), encode_study_record(config))
     trial = study.ask()
     config.space.suggest(trial)
     study.tell(trial, 12.5)
@@ -157,7 +159,7 @@ def test_journal_storage_persists_a_study(tmp_path):
     assert [t.value for t in again.trials] == [12.5]
     assert again.user_attrs["ermrl"]["env_id"] == "CartPoleNoVel-v1"
     with pytest.raises(Exception, match="already exists with another config"):
-        open_study(url, "j", make_sampler("random", 6, 0), tiny(trials=1, space=SearchSpace()).record())
+        open_study(url, "j", make_sampler("random", 6, 0), encode_study_record(tiny(trials=1, space=SearchSpace())))
 
 
 def test_search_space_for_several_reservoirs():

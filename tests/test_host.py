@@ -12,9 +12,9 @@ import pytest
 from ermrl import envs
 from ermrl.agent import AgentConfig, Phi
 from ermrl.errors import ConfigError
-from ermrl.host_loop import unpack_steps
+from ermrl.training.host_loop import unpack_steps
 from ermrl.ppo.config import SB3_DEFAULTS
-from ermrl.train import Population, TrainConfig, Trainer
+from ermrl.training import Population, TrainConfig, Trainer
 
 TINY = dataclasses.replace(SB3_DEFAULTS, n_steps=128, batch_size=64, n_epochs=1, hidden=(16, 16))
 """A small PPO for smoke tests: compiles in a few seconds."""

@@ -41,7 +41,7 @@ def sb3_episodes(env_id: str, seed: int, timesteps: int) -> tuple[np.ndarray, np
 
 def ours(env_id: str, timesteps: int) -> list[tuple[np.ndarray, np.ndarray]]:
     from ermrl.agent import AgentConfig, Phi
-    from ermrl.train import Population, TrainConfig, Trainer
+    from ermrl.training import Population, TrainConfig, Trainer
 
     config = TrainConfig(env_id=env_id, total_timesteps=timesteps, agent=AgentConfig(reservoirs=0))
     results = Trainer(config).run(Population.grid(Phi(1.0, 1.0, 1.0), SEEDS, 3e-4, 0))

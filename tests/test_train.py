@@ -8,7 +8,7 @@ import pytest
 
 from ermrl.agent import AgentConfig, Phi
 from ermrl.ppo.config import PPOConfig, SB3_DEFAULTS
-from ermrl.train import Population, TrainConfig, Trainer, train
+from ermrl.training import Population, TrainConfig, Trainer, train
 
 
 def config(env_id="CartPoleNoVel-v1", timesteps=4096, reservoirs=1, **ppo):

@@ -11,6 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ermrl.storage import atomic_path  # noqa: E402
+
 
 def learning_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str, path: Path | str,
                     formats: tuple[str, ...] = ("png",)) -> list[Path]:
@@ -36,7 +38,8 @@ def learning_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str
     written = []
     for fmt in formats:
         out = path.with_suffix("." + fmt)
-        fig.savefig(out, dpi=120)
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=120, format=fmt)
         written.append(out)
     plt.close(fig)
     return written

@@ -7,9 +7,7 @@ The study keeps its configuration in ``study.user_attrs["ermrl"]``; each complet
 
 from __future__ import annotations
 
-import base64
 import html
-import json
 import math
 from pathlib import Path
 
@@ -24,14 +22,14 @@ from matplotlib.colors import Normalize  # noqa: E402
 from optuna.study import StudyDirection  # noqa: E402
 from optuna.trial import FrozenTrial, TrialState  # noqa: E402
 
+from ermrl import storage
+from ermrl.analysis.html import img as _img
+from ermrl.analysis.html import page
+from ermrl.analysis.html import table as _table
 from ermrl.analysis.plots import learning_curves
-from ermrl.runs import read_curves_csv
+from ermrl.analysis.statistics import format_ci
 
 MARKERS = ("o", "^", "s", "D", "v", "P", "*", "X")
-CSS = """body{font-family:sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;color:#222;line-height:1.4}
-table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:left}
-th{background:#f3f3f3}td.n{text-align:right;font-family:monospace}img{max-width:100%}
-.warn{color:#a00}"""
 
 
 def _maximize(study: optuna.Study) -> bool:
@@ -70,12 +68,11 @@ def phi(trial: FrozenTrial, k: int) -> dict[str, list[float]]:
 
 
 def _save(fig, path: Path | str) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with storage.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
-    return path
+    return Path(path)
 
 
 def fitness_over_trials(study: optuna.Study, path: Path | str) -> Path:
@@ -156,86 +153,106 @@ def _flatten(d: dict, prefix: str = "") -> list[tuple[str, object]]:
     return rows
 
 
-def _fmt(v) -> str:
-    if isinstance(v, float):
-        return f"{v:.6g}"
-    return v if isinstance(v, str) else json.dumps(v, default=str)
-
-
-def _table(header: list[str], rows: list[list]) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(
-        f'<td class="n">{html.escape(_fmt(c))}</td>' if isinstance(c, (int, float)) and not isinstance(c, bool)
-        else f"<td>{html.escape(_fmt(c))}</td>" for c in row) + "</tr>" for row in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
-
-
-def _img(path: Path, alt: str) -> str:
-    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
-    return f'<p><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}"></p>'
-
-
 def _test_figure(test_dir: Path, run_dir: Path) -> Path | None:
     """``test/test_phase.png``, else one redrawn from ``test/curves.csv`` (model, seed, timestep, value) if present."""
     if (test_dir / "test_phase.png").is_file():
         return test_dir / "test_phase.png"
     if not (test_dir / "curves.csv").is_file():
         return None
-    return learning_curves(read_curves_csv(test_dir / "curves.csv"), "test phase", run_dir / "test_phase.png")[0]
+    return learning_curves(storage.read_curves_csv(test_dir / "curves.csv"), "test phase",
+                           run_dir / f"{test_dir.name}_phase.png")[0]
+
+
+def test_phase_section(test_dir: Path, run_dir: Path) -> list[str]:
+    """HTML of one test phase: its figure, then per model mean ± std, IQM with its 95% CI, diverged seeds, AUC
+    and the probability of improvement over each PPO baseline."""
+    rows = storage.read_test_summary(test_dir)
+    if rows is None:
+        return []
+    env_id = rows[0].get("env_id", "")
+    evolved_on = rows[0].get("evolved_on") or []
+    parts = [f"<h3>Test phase on {html.escape(env_id)}</h3>"]
+    if evolved_on and evolved_on != [env_id]:
+        parts.append(f"<p>Φ* evolved on {html.escape(', '.join(evolved_on))} (generalization to an unseen env).</p>")
+    if rows[0].get("phi_choice"):
+        parts.append(f"<p>Φ*: {html.escape(rows[0]['phi_choice'])}</p>")
+    fig = _test_figure(test_dir, run_dir)
+    if fig is not None:
+        parts.append(_img(fig, f"test phase on {env_id}"))
+    parts.append(_table(["model", "lr", "seeds", "final mean ± std", "final IQM [95% CI]", "diverged", "AUC mean ± std"], [
+        [r.get("model", ""), r.get("learning_rate"), r.get("n_seeds"), _pm(r.get("final_mean"), r.get("final_std")),
+         format_ci(r.get("final_iqm"), r.get("final_iqm_low"), r.get("final_iqm_high")), r.get("diverged", 0),
+         _pm(r.get("auc_mean"), r.get("auc_std"))] for r in rows]))
+    improvements = [[r["model"], b, f"{p:.2f} [{lo:.2f}, {hi:.2f}]"] for r in rows
+                    for b, (p, lo, hi) in r.get("improvement", {}).items()]
+    if improvements:
+        parts.append(_table(["model", "against", "P(improvement) [95% CI]"], improvements))
+    return parts
+
+
+def _pm(mean, std) -> str:
+    return "—" if mean is None else f"{mean:.6g} ± {std:.6g}"
+
+
+def test_dirs(run_dir: Path) -> list[Path]:
+    """The study's test phases: ``test`` first, then ``test-ENV`` folders."""
+    run_dir = Path(run_dir)
+    found = [run_dir / "test"] + sorted(run_dir.glob("test-*"))
+    return [d for d in found if (d / "summary.json").is_file()]
 
 
 def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | None = None) -> Path:
-    """Writes ``<run_dir>/report.html`` (or ``out``), with fitness_over_trials.png and hp_map.png beside it in run_dir."""
+    """Writes ``<run_dir>/report.html`` (or ``out``), with fitness_over_trials.png and hp_map.png beside it in
+    run_dir. Results come first (best and selected Φ, test phases with their statistics), then the evolution's
+    figures, failed trials, and the configuration (collapsed)."""
     run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
     out = Path(out) if out is not None else run_dir / "report.html"
     cfg = study.user_attrs.get("ermrl", {})
     k = n_reservoirs(study)
     done, bad, best = completed(study), failed(study), ranked(study)[:1]
-    title = f"ER-MRL evolution: {cfg.get('env_id', study.study_name)}"
+    envs = cfg.get("envs") or [cfg.get("env_id", study.study_name)]
+    title = f"ER-MRL evolution: {', '.join(envs)}"
     parts = [f"<h1>{html.escape(title)}</h1>", f"<p>study <code>{html.escape(study.study_name)}</code></p>"]
-
-    parts += ["<h2>Configuration</h2>", _table(["key", "value"], [[key, v] for key, v in _flatten(cfg)])]
     generations = {t.user_attrs["generation"] for t in study.trials if "generation" in t.user_attrs}
-    parts += ["<h2>Trials</h2>", _table(["completed", "failed", "total", "generations"],
-                                        [[len(done), len(bad), len(study.trials), len(generations)]])]
+    parts += [_table(["completed", "failed", "total", "generations"],
+                     [[len(done), len(bad), len(study.trials), len(generations)]])]
     if not done:
         parts.append('<p class="warn">no completed trial yet</p>')
-
-    parts += ["<h2>Fitness over trials</h2>",
-              _img(fitness_over_trials(study, run_dir / "fitness_over_trials.png"), "fitness over trials"),
-              "<h2>HP map</h2>", _img(hp_map(study, run_dir / "hp_map.png"), "HP map")]
 
     if best:
         t = best[0]
         p = phi(t, k)
         parts += ["<h2>Best &Phi;</h2>",
                   _table(["trial", "fitness", "generation"], [[t.number, t.value, t.user_attrs.get("generation", "")]]),
-                  "<h3>Parameters</h3>", _table(["param", "value"], [[n, v] for n, v in t.params.items()]),
-                  "<h3>Reservoirs</h3>",
+                  _table(["param", "value"], [[n, v] for n, v in t.params.items()]),
                   _table(["reservoir"] + list(p), [[r + 1] + [p[n][r] for n in p] for r in range(k)
                                                     if all(len(p[n]) > r for n in p)])]
         seeds = t.user_attrs.get("seed_fitness", [])
         if seeds:
-            parts += ["<h3>Per-seed fitness</h3>", _table(["seed index", "fitness"], [[i, float(v)] for i, v in enumerate(seeds)])]
+            parts += [_table(["seed index", "fitness"], [[i, v] for i, v in enumerate(seeds)])]
+        if t.user_attrs.get("env_scores"):
+            parts += [_table(["env", "score", "nScore"], [[e, v, t.user_attrs["env_nscores"].get(e)]
+                                                           for e, v in t.user_attrs["env_scores"].items()])]
+    selection = study.user_attrs.get("selection")
+    if selection:
+        parts += [f"<h2>Selection of &Phi;*</h2><p>the top {len(selection['trials'])} trials re-evaluated on "
+                  f"{len(selection['seeds'])} fresh seeds; selected: trial {selection['winner']}</p>",
+                  _table(["trial", "evolution fitness", "fresh-seed fitness"],
+                         [[n, a, b] for n, a, b in zip(selection["trials"], selection["evolution_values"],
+                                                       selection["values"])])]
+    tests = test_dirs(run_dir)
+    if tests:
+        parts.append("<h2>Test phases</h2>")
+        for d in tests:
+            parts += test_phase_section(d, run_dir)
 
+    parts += ["<h2>Fitness over trials</h2>",
+              _img(fitness_over_trials(study, run_dir / "fitness_over_trials.png"), "fitness over trials"),
+              "<h2>HP map</h2>", _img(hp_map(study, run_dir / "hp_map.png"), "HP map")]
     if bad:
         parts += ["<h2>Failed trials</h2>", _table(["trial", "generation", "reason"], [
             [t.number, t.user_attrs.get("generation", ""), str(t.user_attrs.get("failure", ""))] for t in bad])]
-
-    summary = run_dir / "test" / "summary.json"
-    if summary.is_file():
-        rows = json.loads(summary.read_text())
-        parts.append("<h2>Test phase</h2>")
-        fig = _test_figure(summary.parent, run_dir)
-        if fig is not None:
-            parts.append(_img(fig, "test phase"))
-        parts.append(_table(["model", "final mean", "final std", "AUC mean", "AUC std", "seeds"], [
-            [r.get("model", ""), r.get("final_mean", ""), r.get("final_std", ""), r.get("auc_mean", ""),
-             r.get("auc_std", ""), r.get("n_seeds", "")] for r in rows]))
-
-    doc = (f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
-           f"<style>{CSS}</style></head>\n<body>\n" + "\n".join(parts) + "\n</body></html>\n")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(doc, encoding="utf-8")
+    parts += ["<details><summary>Configuration</summary>",
+              _table(["key", "value"], [[key, v] for key, v in _flatten(cfg)]), "</details>"]
+    storage.write_text(out, page(title, parts))
     return out

@@ -1,5 +1,5 @@
 """The host backend: any Gymnasium env id, its envs stepped on the host (in worker processes when a step is
-costly), while the reservoirs, policy and PPO update run in JAX (see :mod:`ermrl.host_loop`).
+costly), while the reservoirs, policy and PPO update run in JAX (see :mod:`ermrl.training.host_loop`).
 
 Why not ``jax.pure_callback`` from inside the jitted rollout: on XLA:CPU each callback spends about 130 µs
 moving its arguments into JAX arrays, several times the cost of a MuJoCo step. One jitted call per step from a

@@ -1,1 +1,1 @@
-"""The paper's experiments built from the engine: the test phase (and later baselines and generalization)."""
+"""The paper's experiments built from the engine: the test phase, baselines and normalized scores, generalization, and the named experiments."""

@@ -91,9 +91,10 @@ def load_study(storage_url: str, name: str) -> optuna.Study:
 
 
 def _comparable(record: dict) -> str:
-    """The config without the fields that may change between a run and its resumption (results do not
-    depend on the number of env worker processes)."""
-    keep = {k: v for k, v in record.items() if k not in ("trials",)}
+    """The config without the fields that may change between a run and its resumption: the trial target, the
+    baselines (a resumed study keeps the constants it started with) and the number of env worker processes
+    (results do not depend on it)."""
+    keep = {k: v for k, v in record.items() if k not in ("trials", "baselines")}
     if isinstance(keep.get("train"), dict):
         keep["train"] = {k: v for k, v in keep["train"].items() if k != "env_workers"}
     return json.dumps(keep, sort_keys=True, default=str)

@@ -77,6 +77,14 @@ class SearchSpace:
         return Phi(get("sr"), get("lr"), iss)
 
     def to_dict(self) -> dict:
+        """The study record's form: {"sr": [lo, hi], "lr": [lo, hi], "iss": [lo, hi] or {"fixed": v}}."""
         out = {hp: list(getattr(self, hp)) for hp in ("sr", "lr")}
         out["iss"] = {"fixed": self.fixed_iss} if self.fixed_iss is not None else list(self.iss)
         return out
+
+    @staticmethod
+    def from_dict(reservoirs: int, d: dict) -> "SearchSpace":
+        """Inverse of :meth:`to_dict`."""
+        fixed = d["iss"]["fixed"] if isinstance(d["iss"], dict) else None
+        iss = SearchSpace.iss if fixed is not None else tuple(d["iss"])
+        return SearchSpace(reservoirs, tuple(d["sr"]), tuple(d["lr"]), iss, fixed)

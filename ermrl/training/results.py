@@ -6,10 +6,7 @@ RewardsSavingWrapper computes it; a Φ's fitness is the mean over its seeds.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import json
-from pathlib import Path
 
 import numpy as np
 
@@ -108,34 +105,13 @@ class Results:
                 values[a] = np.where(done_by > 0, (csum[done_by] - csum[lo]) / (done_by - lo), np.nan)
         return grid, values
 
+    def select(self, agents) -> "Results":
+        """The results of a subset of agents (indices into the agent axis), e.g. one model of a population."""
+        idx = np.asarray(agents)
+        return dataclasses.replace(
+            self, seeds=self.seeds[idx], phi={k: v[idx] for k, v in self.phi.items()},
+            learning_rate=self.learning_rate[idx], episodes=[self.episodes[i] for i in idx], finite=self.finite[idx],
+            metrics={k: v[idx] for k, v in self.metrics.items()})
+
     def agent_steps_per_s(self) -> float:
         return self.size * self.total_timesteps / self.train_s if self.train_s > 0 else float("nan")
-
-    # -- files -----------------------------------------------------------------------------------------
-    def write_csv(self, path: Path, label: str = "") -> None:
-        """One row per completed episode: model, agent, seed, timestep, return, length."""
-        with open(path, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["model", "agent", "seed", "timestep", "return", "length"])
-            for a, ep in enumerate(self.episodes):
-                for t, r, n in zip(ep.timestep, ep.ret, ep.length):
-                    w.writerow([label, a, int(self.seeds[a]), int(t), f"{r:.6g}", int(n)])
-
-    def summary(self) -> dict:
-        """JSON-ready per-agent fitness and timing."""
-        fit = self.fitness()
-        return {
-            "env_id": self.env_id,
-            "total_timesteps": self.total_timesteps,
-            "seeds": self.seeds.tolist(),
-            "fitness": [None if np.isnan(v) else float(v) for v in fit],
-            "mean_fitness": None if np.all(np.isnan(fit)) else float(np.nanmean(fit)),
-            "episodes": [len(e.ret) for e in self.episodes],
-            "diverged": (~self.finite).tolist(),
-            "compile_s": self.compile_s,
-            "train_s": self.train_s,
-            "agent_steps_per_s": self.agent_steps_per_s(),
-        }
-
-    def write_summary(self, path: Path) -> None:
-        Path(path).write_text(json.dumps(self.summary(), indent=2))

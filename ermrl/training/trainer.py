@@ -20,14 +20,14 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from ermrl import envs
 from ermrl.agent import Agent, AgentConfig, Phi, Reservoirs
 from ermrl.errors import ConfigError
-from ermrl.host_loop import HostIteration
+from ermrl.training.host_loop import HostIteration
 from ermrl.ppo import update as ppo_update
 from ermrl.ppo.config import PPOConfig
 from ermrl.ppo.losses import Batch, bootstrapped_gae
 from ermrl.ppo.networks import ActorCritic
-from ermrl.results import Results
+from ermrl.training.results import Results
 from ermrl.envs import HostEnv, JaxEnv
-from ermrl.rollout import EnvCarry, Step, collect, start, start_from_obs
+from ermrl.training.rollout import EnvCarry, Step, collect, start, start_from_obs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,16 +69,19 @@ class Population:
         return len(self.seeds)
 
     @staticmethod
-    def grid(phis: list[Phi] | Phi, seeds: int | list[int], learning_rate: float, reservoirs: int) -> "Population":
-        """Every Φ crossed with every seed: agent i = (phis[i // S], seeds[i % S]). Φ fields are scalars or (K,)."""
+    def grid(phis: list[Phi] | Phi, seeds: int | list[int], learning_rate: float | list[float],
+             reservoirs: int) -> "Population":
+        """Every Φ crossed with every learning rate and every seed: agent i = (phis[i // (L·S)],
+        learning_rates[i // S % L], seeds[i % S]). Φ fields are scalars or (K,)."""
         phis = [phis] if isinstance(phis, Phi) else list(phis)
         seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
+        lrs = [learning_rate] if np.ndim(learning_rate) == 0 else list(learning_rate)
         as_k = lambda v: np.broadcast_to(np.asarray(v, np.float32), (reservoirs,))
-        rows = [(p, s) for p in phis for s in seed_list]
+        rows = [(p, lr, s) for p in phis for lr in lrs for s in seed_list]
         return Population(
-            seeds=np.array([s for _, s in rows], np.int64),
-            phi=Phi(*(np.stack([as_k(getattr(p, f)) for p, _ in rows]) for f in Phi._fields)),
-            learning_rate=np.full(len(rows), learning_rate, np.float32),
+            seeds=np.array([s for _, _, s in rows], np.int64),
+            phi=Phi(*(np.stack([as_k(getattr(p, f)) for p, _, _ in rows]) for f in Phi._fields)),
+            learning_rate=np.array([lr for _, lr, _ in rows], np.float32),
         )
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from ermrl.train import Progress as TrainProgress
+from ermrl.training import Progress as TrainProgress
 
 
 class TrainingBar:
@@ -42,9 +42,10 @@ class EvolutionBar:
     """``progress_fn`` for ``evolve``: generation, trials done of total, best fitness with its Φ,
     agent-steps/s, and an ETA for the whole study."""
 
-    def __init__(self, total_trials: int, popsize: int, console: Console | None = None, enabled: bool = True):
+    def __init__(self, total_trials: int, popsize: int, n_envs: int = 1, console: Console | None = None,
+                 enabled: bool = True):
         self.console = console or Console(stderr=True)
-        self.total_trials, self.popsize = total_trials, popsize
+        self.total_trials, self.popsize, self.n_envs = total_trials, popsize, n_envs
         self._bar = Progress(TextColumn("{task.description}"), BarColumn(bar_width=20), TextColumn("{task.fields[rate]}"),
                              TextColumn("study ETA {task.fields[eta]}"), console=self.console, disable=not enabled)
         self._task = None
@@ -65,6 +66,8 @@ class EvolutionBar:
         best = "none yet" if p.best_value is None else f"{p.best_value:.1f} (" + ", ".join(
             f"{k} {v:.3g}" for k, v in p.best_params.items()) + ")"
         desc = f"gen {p.generation} | {p.completed}/{p.trials} trials | best {best}"
+        if self.n_envs > 1 and p.train is not None:
+            desc += f" | {p.env_id}"
         if p.train is None:  # a generation was told
             if self._gen_start is not None:
                 self._gen_seconds.append(time.perf_counter() - self._gen_start)
@@ -76,8 +79,8 @@ class EvolutionBar:
         rate = p.train.agent_steps / p.train.elapsed_s if p.train.elapsed_s > 0 else 0.0
         gens_left = -(-(p.trials - p.completed) // self.popsize)
         per_gen = (sum(self._gen_seconds) / len(self._gen_seconds)) if self._gen_seconds else \
-            p.train.elapsed_s * p.train.total_agent_steps / max(p.train.agent_steps, 1)
-        left_this = per_gen * (1 - p.train.agent_steps / p.train.total_agent_steps)
+            self.n_envs * p.train.elapsed_s * p.train.total_agent_steps / max(p.train.agent_steps, 1)
+        left_this = per_gen * (1 - p.train.agent_steps / p.train.total_agent_steps) / self.n_envs
         eta = left_this + per_gen * (gens_left - 1)
         self._bar.update(self._task, description=desc, total=p.train.total_agent_steps, completed=p.train.agent_steps,
                          rate=f"{rate:,.0f} agent-steps/s", eta=_hms(eta))

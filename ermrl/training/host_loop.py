@@ -4,7 +4,7 @@ The JAX backend runs a whole iteration as one program. With Gymnasium envs, ever
 the host, so an iteration here is:
 
 1. for each of the n_steps steps, one jitted call for all A agents that feeds the previous step's outcome
-   to the reservoirs (:func:`ermrl.rollout.advance`) and samples the next actions (:func:`ermrl.rollout.act`),
+   to the reservoirs (:func:`ermrl.training.rollout.advance`) and samples the next actions (:func:`ermrl.training.rollout.act`),
    then ``HostEnv.step`` for all A · n_envs envs (in worker processes when a step is costly);
 2. the PPO update, the same jitted ``learn`` as on the JAX backend, sharded over devices.
 
@@ -25,7 +25,7 @@ from ermrl.envs.host_backend import HostEnv
 from ermrl.envs.host_groups import Stepped
 from ermrl.envs.jax_backend import Transition
 from ermrl.ppo.config import PPOConfig
-from ermrl.rollout import EnvCarry, Step, act, advance
+from ermrl.training.rollout import EnvCarry, Step, act, advance
 
 
 def pack_step(step: Step) -> jax.Array:

@@ -1,7 +1,8 @@
 """The outer loop: CMA-ES over Φ, one generation at a time (paper §3, "Outer loop").
 
 Each generation asks the sampler for popsize trials, trains all of them × seeds as ONE population through
-the engine, then tells each trial its fitness (the mean over its seeds). A trial whose training diverged
+the engine (one population per env when the fitness spans several envs), then tells each trial its fitness
+(see :mod:`ermrl.evolution.scoring`). A trial whose training diverged
 (NaN/inf) or finished no episode is told as failed, with the reason in its user attributes.
 
 Resuming: completed trials count toward ``trials``; trials left RUNNING by an interrupted process (a
@@ -18,42 +19,12 @@ import numpy as np
 import optuna
 from optuna.trial import TrialState
 
-from ermrl.results import Results
-from ermrl.search_space import SearchSpace
-from ermrl.runs import config_dict
-from ermrl.train import Population, Progress, TrainConfig, Trainer
+from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.scoring import score
+from ermrl.training import Population, Progress, Results, Trainer
 
 MAX_FAILED_GENERATIONS = 3
 """Stop when this many generations in a row have no completed trial (something is wrong with the setup)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class EvolveConfig:
-    """An evolution: what each candidate's training is, and how many candidates to try."""
-
-    train: TrainConfig
-    space: SearchSpace
-    trials: int = 900
-    """Completed trials to reach (the paper: 900)."""
-    seeds: int = 3
-    """Seeds per candidate Φ; its fitness is the mean over them (the paper: 3)."""
-    sampler: str = "cmaes"
-    popsize: int | None = None
-    """Trials per generation; None takes CMA-ES's default 4 + ⌊3 ln n⌋."""
-    sampler_seed: int | None = 0
-
-    @property
-    def generation_size(self) -> int:
-        return self.popsize or self.space.default_popsize()
-
-    def record(self) -> dict:
-        """What the study stores (user attribute ``ermrl``) to resume, test and report."""
-        return {
-            "env_id": self.train.env_id, "reservoirs": self.space.reservoirs, "seeds": self.seeds,
-            "timesteps": self.train.total_timesteps, "sampler": self.sampler, "popsize": self.generation_size,
-            "learning_rate": self.train.ppo.learning_rate, "search_space": self.space.to_dict(),
-            "train": config_dict(self.train), "trials": self.trials,
-        }
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,6 +32,8 @@ class GenerationProgress:
     """Passed to ``progress_fn`` during a generation's training and after it is told."""
 
     generation: int
+    env_id: str
+    """The env whose population is training (the evolution's first env between generations)."""
     completed: int
     """Completed trials in the study."""
     trials: int
@@ -95,35 +68,47 @@ def _best(study: optuna.Study):
         return None, None
 
 
-def tell_generation(study, trials, results: Results, seeds: int, generation: int) -> int:
-    """Tells each trial its fitness, recording per-seed fitness and a curve summary. Returns completed count."""
-    fitness = results.fitness().reshape(len(trials), seeds)
-    _, curves = results.curves()
-    curves = curves.reshape(len(trials), seeds, -1)
-    finite = results.finite.reshape(len(trials), seeds)
+def _floats(values) -> list[float | None]:
+    return [None if not np.isfinite(v) else float(v) for v in np.ravel(values)]
+
+
+def tell_generation(study, trials, results: dict[str, Results], config: EvolveConfig, generation: int) -> int:
+    """Tells each trial its fitness (see :mod:`ermrl.evolution.scoring`) and records, per trial: its Φ, the
+    per-seed fitness, the final curve values and, with several envs, every env's raw score and nScore.
+    Returns how many trials completed."""
+    n, seeds = len(trials), config.seeds
+    env_fitness = {e: r.fitness().reshape(n, seeds) for e, r in results.items()}
+    scores = score(config, env_fitness)
+    first = results[config.env_ids[0]]
+    finite = np.all([r.finite.reshape(n, seeds) for r in results.values()], axis=0)
+    finals = {}
+    for e, r in results.items():
+        with np.errstate(all="ignore"):
+            finals[e] = r.curves()[1].reshape(n, seeds, -1)[:, :, -1]
     done = 0
     for i, trial in enumerate(trials):
-        phi = {k: v.reshape(len(trials), seeds, -1)[i, 0].tolist() for k, v in results.phi.items()}
         trial.set_user_attr("generation", generation)
-        trial.set_user_attr("phi", phi)
-        trial.set_user_attr("seed_fitness", [None if np.isnan(f) else float(f) for f in fitness[i]])
-        with np.errstate(all="ignore"):
-            final = curves[i, :, -1]
-        trial.set_user_attr("curve_final", [None if np.isnan(f) else float(f) for f in final])
+        trial.set_user_attr("phi", {k: v.reshape(n, seeds, -1)[i, 0].tolist() for k, v in first.phi.items()})
+        trial.set_user_attr("seed_fitness", _floats(scores.per_seed[i]))
+        trial.set_user_attr("curve_final", _floats(finals[config.env_ids[0]][i]))
+        if config.normalized:
+            trial.set_user_attr("env_scores", {e: _floats(np.mean(f[i]))[0] for e, f in env_fitness.items()})
+            trial.set_user_attr("env_nscores", {e: _floats(v[i])[0] for e, v in scores.env_nscore.items()})
+            trial.set_user_attr("env_seed_fitness", {e: _floats(f[i]) for e, f in env_fitness.items()})
         if not finite[i].all():
             trial.set_user_attr("failure", f"diverged (NaN/inf) on {int((~finite[i]).sum())} of {seeds} seeds")
             study.tell(trial, state=TrialState.FAIL)
-        elif np.isnan(fitness[i]).any():
+        elif np.isnan(scores.per_seed[i]).any():
             trial.set_user_attr("failure", "no episode completed within the budget")
             study.tell(trial, state=TrialState.FAIL)
         else:
-            study.tell(trial, float(fitness[i].mean()))
+            study.tell(trial, float(scores.value[i]))
             done += 1
     return done
 
 
-def estimate_seconds(trainer: Trainer, config: EvolveConfig, remaining: int) -> float:
-    """Measures one iteration of a full generation (compiling first) and scales it to the remaining trials."""
+def generation_seconds(trainer: Trainer, config: EvolveConfig) -> float:
+    """Seconds one generation takes on ``trainer``'s env: one measured iteration (after compiling), scaled."""
     size = config.generation_size
     phis = [config.space.phi_from_params({n: d.low for n, d in config.space.distributions().items()})] * size
     population = Population.grid(phis, config.seeds, config.train.ppo.learning_rate, config.space.reservoirs)
@@ -134,14 +119,25 @@ def estimate_seconds(trainer: Trainer, config: EvolveConfig, remaining: int) -> 
     np.asarray(log.finite)
     per_iteration = time.perf_counter() - start
     trainer.close()
-    generations = -(-remaining // size)
-    return generations * trainer.n_iterations * per_iteration
+    return trainer.n_iterations * per_iteration
 
 
-def evolve(study: optuna.Study, config: EvolveConfig, trainer: Trainer | None = None,
+def estimate_seconds(trainers: dict[str, Trainer], config: EvolveConfig, remaining: int) -> float:
+    """The remaining trials' time: every env's generation measured once, times the generations left."""
+    generations = -(-remaining // config.generation_size)
+    return generations * sum(generation_seconds(t, config) for t in trainers.values())
+
+
+def make_trainers(config: EvolveConfig) -> dict[str, Trainer]:
+    """One trainer (one compile per population size) for each env of the evolution."""
+    return {e: Trainer(config.train_for(e)) for e in config.env_ids}
+
+
+def evolve(study: optuna.Study, config: EvolveConfig, trainers: dict[str, Trainer] | None = None,
            progress_fn: Callable[[GenerationProgress], None] | None = None) -> optuna.Study:
-    """Runs generations until the study holds ``config.trials`` completed trials."""
-    trainer = trainer or Trainer(config.train)
+    """Runs generations until the study holds ``config.trials`` completed trials. Within a generation, every
+    env's population (the generation's Φ × seeds) trains before the trials are told."""
+    trainers = trainers or make_trainers(config)
     fail_interrupted(study)
     failed_in_a_row = 0
     while (completed := count(study, TrialState.COMPLETE)) < config.trials:
@@ -153,17 +149,19 @@ def evolve(study: optuna.Study, config: EvolveConfig, trainer: Trainer | None = 
         phis = [config.space.suggest(t) for t in trials]
         population = Population.grid(phis, config.seeds, config.train.ppo.learning_rate, config.space.reservoirs)
 
-        def report(p: Progress, generation=generation, completed=completed):
-            if progress_fn is not None:
-                progress_fn(GenerationProgress(generation, completed, config.trials, *_best(study), p))
+        results = {}
+        for env_id, trainer in trainers.items():
+            def report(p: Progress, generation=generation, completed=completed, env_id=env_id):
+                if progress_fn is not None:
+                    progress_fn(GenerationProgress(generation, env_id, completed, config.trials, *_best(study), p))
 
-        results = trainer.run(population, report)
-        done = tell_generation(study, trials, results, config.seeds, generation)
+            results[env_id] = trainer.run(population, report)
+        done = tell_generation(study, trials, results, config, generation)
         failed_in_a_row = 0 if done else failed_in_a_row + 1
         if failed_in_a_row >= MAX_FAILED_GENERATIONS:
             raise RuntimeError(f"{MAX_FAILED_GENERATIONS} generations in a row had no completed trial; "
                                "see the trials' 'failure' attributes")
         if progress_fn is not None:
-            progress_fn(GenerationProgress(generation, count(study, TrialState.COMPLETE), config.trials,
+            progress_fn(GenerationProgress(generation, config.env_ids[0], count(study, TrialState.COMPLETE), config.trials,
                                            *_best(study), None))
     return study

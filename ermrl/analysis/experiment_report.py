@@ -1,0 +1,122 @@
+"""One HTML report for a named experiment: every study's Φ* and test phases, the aggregate over envs (IQM of
+normalized scores and performance profiles), and the cross-study HP map."""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ermrl import storage  # noqa: E402
+from ermrl.analysis import statistics  # noqa: E402
+from ermrl.analysis.html import img, page, table  # noqa: E402
+from ermrl.analysis.report import phi, ranked, test_dirs, test_phase_section  # noqa: E402
+
+MARKERS = {1: "o", 2: "^", 3: "s"}
+
+
+def hp_map_across_studies(studies: list, path: Path, top: int = 30) -> Path:
+    """The paper's HP map: the ``top`` trials of each study on spectral radius × leak rate (log axes), one colour
+    per env, circles for 1 reservoir and triangles for 2 (squares for 3); each reservoir of a trial is a point."""
+    fig, ax = plt.subplots(figsize=(6.5, 5))
+    colours = {}
+    for study in studies:
+        cfg = study.user_attrs.get("ermrl", {})
+        env = "+".join(cfg.get("envs") or [cfg.get("env_id", study.study_name)])
+        k = int(cfg.get("reservoirs", 1))
+        colour = colours.setdefault(env, f"C{len(colours) % 10}")
+        points = [(p["sr"][r], p["lr"][r]) for t in ranked(study)[:top] for p in [phi(t, k)] for r in range(k)
+                  if len(p.get("sr", [])) > r and len(p.get("lr", [])) > r]
+        if points:
+            sr, lr = zip(*points)
+            ax.scatter(sr, lr, color=colour, marker=MARKERS.get(k, "D"), s=30, alpha=0.75, edgecolors="k",
+                       linewidths=0.3, label=f"{env}, {k} reservoir{'s' if k > 1 else ''}")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("spectral radius (sr)")
+    ax.set_ylabel("leak rate (lr)")
+    ax.set_title(f"top {top} Φ of each study")
+    ax.grid(alpha=0.3, which="both")
+    if colours:
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    with storage.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def normalized_test_scores(rows_by_env: dict[str, list[dict]], random_returns: dict[str, float]) -> dict[str, np.ndarray]:
+    """{model kind: (n_seeds, n_envs)} final scores normalized per env as (score − random) / (PPO − random),
+    with PPO the test phase's own 'PPO (same observation)' mean: PPO scores 1 on average, random 0."""
+    kinds: dict[str, list[np.ndarray]] = {}
+    for env, rows in rows_by_env.items():
+        ppo = next((r for r in rows if r["model"] == "PPO (same observation)"), None)
+        if ppo is None or ppo["final_mean"] is None or env not in random_returns:
+            continue
+        rnd = random_returns[env]
+        if ppo["final_mean"] == rnd:
+            continue
+        for r in rows:
+            if r["model"] == "PPO (full observation)":
+                continue
+            x = np.array([np.nan if v is None else v for v in r["per_seed"]], float)
+            kind = "PPO" if r["kind"] == "PPO" else r["model"].split(" (")[0]
+            kinds.setdefault(kind, []).append((x - rnd) / (ppo["final_mean"] - rnd))
+    n = min((len(v) for v in kinds.values()), default=0)
+    return {k: np.stack(v, axis=1) for k, v in kinds.items() if len(v) == n and n > 0}
+
+
+def write_experiment_report(experiment, scale, plans, storage_url: str, folder: Path) -> Path:
+    """Writes ``folder/report.html`` and returns its path."""
+    from ermrl.evolution.study import load_study
+    from ermrl.experiments.baselines import load_table
+
+    folder = Path(folder)
+    title = f"ER-MRL experiment {experiment.name} ({scale.name} scale)"
+    parts = [f"<h1>{html.escape(title)}</h1>", f"<p>{html.escape(experiment.title)}. Paper: "
+             f"{html.escape(experiment.paper)}; claims {', '.join(experiment.claims)}. Scale: "
+             f"{html.escape(scale.description)}. Storage: <code>{html.escape(storage_url)}</code></p>"]
+    studies, rows_by_env, summary = [], {}, []
+    for p in plans:
+        try:
+            study = load_study(storage_url, p.study)
+        except Exception:  # not run yet (e.g. --only ran other studies)
+            continue
+        studies.append(study)
+        best = ranked(study)[:1]
+        sel = study.user_attrs.get("selection", {})
+        summary.append([p.spec.name, ", ".join(p.config.env_ids), p.spec.reservoirs, p.spec.units,
+                        len(ranked(study)), best[0].value if best else None, sel.get("winner")])
+        for d in test_dirs(p.run_dir):
+            rows = storage.read_test_summary(d)
+            rows_by_env.setdefault(rows[0]["env_id"], rows) if rows else None
+    parts += ["<h2>Studies</h2>", table(["study", "evolved on", "K", "units", "completed trials", "best fitness",
+                                         "Φ* (selected trial)"], summary)]
+    table_ = load_table()
+    random_returns = {e: r.mean_return for e in rows_by_env if (r := table_.random(e)) is not None}
+    scores = normalized_test_scores(rows_by_env, random_returns)
+    if scores and next(iter(scores.values())).shape[1] > 1:
+        agg = statistics.aggregate_iqm(scores)
+        parts += ["<h2>Aggregate over envs</h2>",
+                  f"<p>Final test scores normalized per env by the random agent (0) and the test phase's PPO on the "
+                  f"same observation (1), over {next(iter(scores.values())).shape[1]} envs: IQM with 95% stratified "
+                  "bootstrap CIs (rliable).</p>",
+                  table(["model", "IQM of nScore [95% CI]"], [[m, statistics.format_ci(*v, digits=2)] for m, v in agg.items()]),
+                  img(statistics.performance_profile(scores, folder / "performance_profile.png"), "performance profile")]
+    if experiment.hp_map and studies:
+        parts += ["<h2>HP map across studies</h2>",
+                  img(hp_map_across_studies(studies, folder / "hp_map_across_studies.png"), "HP map")]
+    for p in plans:
+        sections = [s for d in test_dirs(p.run_dir) for s in test_phase_section(d, p.run_dir)]
+        if sections:
+            parts += [f"<h2>{html.escape(p.spec.name)}</h2>",
+                      f'<p><a href="{html.escape(p.spec.name)}/report.html">study report</a></p>', *sections]
+    out = folder / "report.html"
+    storage.write_text(out, page(title, parts))
+    return out

@@ -1,0 +1,165 @@
+"""Statistics for few-seed RL results, computed with ``rliable`` (Agarwal et al. 2021, the field's standard).
+
+- the interquartile mean (IQM) with a 95% stratified-bootstrap confidence interval (percentile method);
+- the probability of improvement P(X > Y) of one model over another, with its CI;
+- the aggregate IQM over several tasks' normalized scores, and performance profiles.
+
+Seeds that diverged (None or NaN) are counted in ``n_diverged`` and left out of the statistics, never silently.
+rliable (with pandas and arch) is imported inside the functions: it is slow to import.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+CONFIDENCE = 0.95
+
+
+def _rng(seed: int) -> np.random.RandomState:
+    return np.random.RandomState(seed)
+
+
+@contextlib.contextmanager
+def _seeded(seed: int):
+    """rliable's stratified bootstraps draw their indices from NumPy's *global* generator (whatever random_state
+    says), so seed it for reproducible CIs and restore it afterwards. Also silences arch's warning that
+    ``random_state`` (which rliable passes) is deprecated."""
+    state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="random_state is deprecated", category=FutureWarning)
+            yield
+    finally:
+        np.random.set_state(state)
+
+
+def _finite(scores) -> tuple[np.ndarray, int]:
+    """(finite scores (m,), number of non-finite entries) of a 1-D sequence with None/NaN for diverged seeds."""
+    x = np.array([np.nan if v is None else v for v in np.ravel(np.asarray(scores, dtype=object))], float)
+    ok = np.isfinite(x)
+    return x[ok], int((~ok).sum())
+
+
+@dataclasses.dataclass(frozen=True)
+class ScoreSummary:
+    """One model's final scores on one task, over seeds."""
+
+    n: int
+    """Seeds given, diverged ones included."""
+    n_diverged: int
+    """Seeds whose score is None/NaN (diverged, or no episode); left out of the statistics below."""
+    mean: float | None
+    std: float | None
+    """Population std (ddof 0), as the paper's shaded bands."""
+    iqm: float | None
+    iqm_low: float | None
+    iqm_high: float | None
+    """The IQM's 95% stratified-bootstrap CI."""
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def iqm_interval(scores: np.ndarray, reps: int = 2000, seed: int = 0) -> tuple[float, float, float]:
+    """(IQM, low, high) of ``scores`` (n_runs,) or (n_runs, n_tasks), with rliable's stratified bootstrap."""
+    from rliable import library, metrics
+
+    scores = np.asarray(scores, float)
+    scores = scores[:, None] if scores.ndim == 1 else scores
+    with _seeded(seed):
+        point, interval = library.get_interval_estimates({"m": scores}, lambda x: np.array([metrics.aggregate_iqm(x)]),
+                                                         reps=reps, confidence_interval_size=CONFIDENCE,
+                                                         random_state=_rng(seed))
+    return float(point["m"][0]), float(interval["m"][0, 0]), float(interval["m"][1, 0])
+
+
+def summarize(scores, reps: int = 2000, seed: int = 0) -> ScoreSummary:
+    """``scores``: (n_seeds,) final scores of one model on one task, None/NaN for a diverged seed. With one
+    finite score the CI is that point; with none, every statistic is None."""
+    x, bad = _finite(scores)
+    n = len(x) + bad
+    if len(x) == 0:
+        return ScoreSummary(n, bad, None, None, None, None, None)
+    if len(x) == 1:
+        v = float(x[0])
+        return ScoreSummary(n, bad, v, 0.0, v, v, v)
+    iqm, low, high = iqm_interval(x, reps, seed)
+    return ScoreSummary(n, bad, float(x.mean()), float(x.std()), iqm, low, high)
+
+
+def probability_of_improvement(x, y, reps: int = 2000, seed: int = 0) -> tuple[float, float, float]:
+    """(P(X > Y), low, high): the probability that a run of model x beats a run of model y (ties count half,
+    by the Mann-Whitney U statistic), averaged over tasks, with a 95% CI from rliable's independent stratified
+    bootstrap. ``x`` (n_x,) or (n_x, n_tasks), ``y`` likewise with the same tasks; runs with a non-finite score
+    in any task are left out."""
+    from rliable import library, metrics
+
+    def clean(a):
+        shape = np.shape(a)
+        a = np.array([np.nan if v is None else v for v in np.ravel(np.asarray(a, dtype=object))], float).reshape(shape)
+        a = a[:, None] if a.ndim == 1 else a
+        return a[np.isfinite(a).all(axis=1)]
+
+    x, y = clean(x), clean(y)
+    if len(x) == 0 or len(y) == 0:
+        raise ValueError("probability of improvement needs at least one finite run of each model")
+    if len(x) == 1 and len(y) == 1:  # nothing to resample: the CI is the point
+        p = float(metrics.probability_of_improvement(x, y))
+        return p, p, p
+    with _seeded(seed):
+        point, interval = library.get_interval_estimates({"xy": [x, y]}, metrics.probability_of_improvement,
+                                                         reps=reps, confidence_interval_size=CONFIDENCE,
+                                                         random_state=_rng(seed))
+    low, high = np.ravel(interval["xy"])
+    return float(np.ravel(point["xy"])[0]), float(low), float(high)
+
+
+def aggregate_iqm(scores: dict[str, np.ndarray], reps: int = 2000, seed: int = 0) -> dict[str, tuple[float, float, float]]:
+    """{model: (n_runs, n_tasks) normalized scores} -> {model: (IQM, low, high)} over every run and task, the
+    bootstrap stratified over tasks (rliable). Non-finite scores must be handled by the caller."""
+    return {m: iqm_interval(np.asarray(s, float), reps, seed) for m, s in scores.items()}
+
+
+def performance_profile(scores: dict[str, np.ndarray], path: Path | str, thresholds=None, reps: int = 2000,
+                        seed: int = 0) -> Path:
+    """Plots rliable's performance profiles, the fraction of runs whose normalized score exceeds τ with 95% CI
+    bands, for {model: (n_runs, n_tasks)} into ``path`` (PNG), written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from rliable import library, plot_utils
+
+    from ermrl.storage import atomic_path
+
+    scores = {m: np.asarray(s, float) for m, s in scores.items()}
+    if thresholds is None:
+        allv = np.concatenate([s.ravel() for s in scores.values()])
+        allv = allv[np.isfinite(allv)]
+        lo, hi = (float(allv.min()), float(allv.max())) if allv.size else (0.0, 1.0)
+        thresholds = np.linspace(min(lo, 0.0), max(hi, 1.0), 81)
+    with _seeded(seed):
+        profiles, cis = library.create_performance_profile(scores, thresholds, reps=reps)
+    fig, ax = plt.subplots(figsize=(7, 4))
+    colors = {m: f"C{i}" for i, m in enumerate(scores)}
+    plot_utils.plot_performance_profiles(profiles, thresholds, performance_profile_cis=cis, colors=colors, ax=ax,
+                                         xlabel="normalized score (τ)", ylabel="fraction of runs with score > τ")
+    ax.legend([plt.Line2D([0], [0], color=c) for c in colors.values()], list(colors), fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def format_ci(value, low, high, digits: int = 1) -> str:
+    """'412.3 [388.0, 430.1]', or '—' without a value."""
+    if value is None:
+        return "—"
+    return f"{value:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"

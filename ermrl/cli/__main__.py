@@ -1,0 +1,5 @@
+import sys
+
+from ermrl.cli import main
+
+sys.exit(main())

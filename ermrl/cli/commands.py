@@ -1,0 +1,337 @@
+"""The study pipeline's commands: train, evolve, select, test, report, plot, baselines."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from ermrl.cli import options
+from ermrl.errors import ConfigError
+
+# -- parsers ---------------------------------------------------------------------------------------------
+
+
+def add_parsers(sub, formatter) -> None:
+    p = sub.add_parser("train", help="train ER-MRL agents (or plain PPO) at a fixed Φ over several seeds",
+                       description="Train one Φ on several seeds as one vectorized population, then write the "
+                                   "effective config (JSON), episodes and curves (CSV), a summary and a learning-curve "
+                                   "PNG into the run folder.", formatter_class=formatter)
+    p.add_argument("--env", default="CartPoleNoVel-v1", help="env id; *NoVel-* ids delete the velocity dims")
+    for name, default in (("sr", 0.95), ("lr", 0.5), ("iss", 1.0)):
+        p.add_argument(f"--{name}", type=float, nargs="+", default=[default],
+                       help={"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}[name]
+                       + ", one value or one per reservoir")
+    p.add_argument("--seeds", type=int, default=3, help="number of seeds (0..N-1)")
+    p.add_argument("--no-reservoir", action="store_true", help="plain PPO: the policy sees the observation")
+    options.add_options(p, "env", "agent", "ppo")
+    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/train-ENV-TIME)")
+    _common(p)
+
+    p = sub.add_parser("evolve", help="evolve reservoir hyperparameters Φ with CMA-ES (the outer loop)",
+                       description="Evolve Φ = (sr, lr, iss) with Optuna. Each generation (popsize trials × seeds) "
+                                   "trains as one population per env. With several --env, a trial's fitness is the "
+                                   "mean normalized score over the envs (paper §4.3), from the baselines table. "
+                                   "Rerunning the same command resumes the study.", formatter_class=formatter)
+    p.add_argument("--env", action="append", default=None, metavar="ID",
+                   help="env id; repeat for a fitness over several envs (default CartPoleNoVel-v1)")
+    p.add_argument("--seeds", type=int, default=3, help="seeds per trial; its fitness is their mean")
+    options.add_options(p, "env", "agent", "ppo", "search")
+    p.add_argument("--baselines", type=Path, default=None, metavar="TABLE",
+                   help="baselines table (default runs/baselines.json over the shipped one); several envs only")
+    _study_location(p, required=False)
+    p.add_argument("--no-estimate", action="store_true", help="skip the warm-up that estimates the total time")
+    _common(p)
+
+    p = sub.add_parser("select", help="re-evaluate the top trials on fresh seeds and pick a robust Φ*",
+                       description="Re-evaluate the K best trials of a study on S new seeds (the evolution's envs, "
+                                   "budget and fitness), record every re-evaluation and the winner in the study. "
+                                   "`ermrl test` then uses the winner.", formatter_class=formatter)
+    _study_location(p)
+    p.add_argument("--top", type=int, default=5, help="how many of the best trials to re-evaluate")
+    p.add_argument("--seeds", type=int, default=5, help="fresh seeds per trial (2000, 2001, ...)")
+    _common(p)
+
+    p = sub.add_parser("test", help="test phase: train Φ* on new seeds against PPO baselines",
+                       description="Train Φ* (the selected trial, else the best) on new seeds, plus vanilla PPO on "
+                                   "the same observation and PPO with full observations; write curves (CSV), a "
+                                   "summary with IQM and bootstrap CIs, and the paper-style figure. --env tests on an "
+                                   "env outside the evolution (generalization).", formatter_class=formatter)
+    _study_location(p)
+    options.add_options(p, "test")
+    _common(p)
+
+    p = sub.add_parser("report", help="write a self-contained HTML report of a study",
+                       description="Write report.html (images embedded): results first (best Φ, test phases with "
+                                   "statistics), then fitness over trials, the HP map and the configuration.",
+                       formatter_class=formatter)
+    _study_location(p)
+    _common(p, quiet=False)
+
+    p = sub.add_parser("plot", help="plot several run folders' learning curves together",
+                       description="Read the curves.csv of each run folder (from `ermrl train` or `ermrl test`) and "
+                                   "draw every model in one figure, mean ± std over seeds.", formatter_class=formatter)
+    p.add_argument("runs", type=Path, nargs="+", help="run folders holding curves.csv")
+    p.add_argument("--out", type=Path, required=True, help="figure path (.png; .svg is written beside it too)")
+    p.add_argument("--title", default="", help="figure title (default: the env id of the first run)")
+    _common(p, quiet=False)
+
+    p = sub.add_parser("baselines", help="compute the random and PPO scores that normalize several envs' fitness",
+                       description="For each env: the random agent's mean episode return (uniform actions) and "
+                                   "vanilla PPO's fitness with the evolution's definition, seeds and budget; stored "
+                                   "with their provenance in the baselines table, which `ermrl evolve` reads for "
+                                   "several envs.", formatter_class=formatter)
+    p.add_argument("--env", action="append", required=True, metavar="ID", help="env id; repeat for several")
+    p.add_argument("--seeds", type=int, default=3, help="PPO seeds (0..N-1, the evolution's)")
+    p.add_argument("--random-episodes", type=int, default=100, help="random-agent episodes per env")
+    options.add_options(p, "env", "agent", "ppo", skip=())
+    p.add_argument("--table", type=Path, default=None, help="table to update (default runs/baselines.json)")
+    p.add_argument("--recompute", action="store_true", help="recompute entries that the table already has")
+    _common(p)
+
+
+def _common(p, quiet: bool = True) -> None:
+    options.add_config_option(p)
+    if quiet:
+        p.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def _study_location(p, required: bool = True) -> None:
+    p.add_argument("--study", required=required, default=None,
+                   help="study name, as given to or printed by `ermrl evolve`" + ("" if required else
+                                                                                   " (default ENV-Kres-STEPSk)"))
+    p.add_argument("--storage", default=None, help="Optuna storage URL or journal file (default sqlite in runs/STUDY)")
+    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/STUDY)")
+
+
+def _run_dir(args) -> Path:
+    return args.out or Path("runs") / args.study
+
+
+def _storage(args) -> str:
+    from ermrl.evolution.study import default_storage
+
+    return args.storage or default_storage(_run_dir(args))
+
+
+def _storage_flag(args) -> str:
+    out = f" --storage {args.storage}" if args.storage else ""
+    return out + (f" --out {args.out}" if args.out else "")
+
+
+def _bars(quiet: bool):
+    """(progress factory label -> progress_fn, closer) for commands that train several models in turn."""
+    from ermrl.cli.progress import TrainingBar
+
+    bars = []
+
+    def progress(label):
+        bar = TrainingBar(label, enabled=not quiet)
+        bar.__enter__()
+        bars.append(bar)
+        return bar.update
+
+    def close():
+        for bar in bars:
+            bar.__exit__(None, None, None)
+
+    return progress, close
+
+
+# -- train and plot --------------------------------------------------------------------------------------
+
+
+def _phi_values(name: str, values: list[float], k: int) -> list[float]:
+    if len(values) == 1:
+        return values * k
+    if len(values) != k:
+        raise ConfigError(f"--{name} got {len(values)} values for {k} reservoirs; give one value or {k}")
+    return values
+
+
+def _check_phi(phi) -> None:
+    import numpy as np
+
+    for name, v in zip(("sr", "lr", "iss"), phi):
+        if not np.all(np.isfinite(v)) or np.any(v <= 0):
+            raise ConfigError(f"--{name} must be positive and finite, got {v.tolist()}")
+    if np.any(phi.lr > 1):
+        raise ConfigError(f"--lr (leak rate) must be in (0, 1], got {phi.lr.tolist()}")
+
+
+def cmd_train(args) -> int:
+    import numpy as np
+
+    from ermrl import envs, storage
+    from ermrl.agent import Phi
+    from ermrl.analysis.plots import learning_curves
+    from ermrl.cli.progress import TrainingBar
+    from ermrl.training import Population, Trainer
+
+    k = 0 if args.no_reservoir else args.reservoirs
+    envs.describe(args.env, args.backend)  # fail fast on an unknown id or a missing extra
+    if args.seeds < 1:
+        raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
+    config = options.train_config(args, args.env, k)
+    phi = Phi(*(np.array(_phi_values(n, getattr(args, n), max(k, 1))[: max(k, 1)], np.float32) for n in ("sr", "lr", "iss")))
+    _check_phi(phi)
+    population = Population.grid(phi, args.seeds, config.ppo.learning_rate, k)
+    label = "PPO" if k == 0 else f"ER-MRL ({k} reservoir{'s' if k > 1 else ''})"
+    out = args.out or Path("runs") / f"train-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+    with TrainingBar(f"{args.env} × {args.seeds} seeds", enabled=not args.quiet) as bar:
+        results = Trainer(config).run(population, bar.update)
+    run = storage.write_train_run(out, config, results, label, options.effective(args))
+    learning_curves({label: results.curves()}, f"{results.env_id}: {label}", run.figure)
+    fit = results.fitness()
+    for seed, f in zip(results.seeds, fit):
+        print(f"seed {seed}: fitness {f:.2f} (mean return of the last 10 training episodes)")
+    print(f"mean fitness {np.nanmean(fit):.2f} ± {np.nanstd(fit):.2f} | {results.agent_steps_per_s():,.0f} agent-steps/s, "
+          f"compile {results.compile_s:.1f}s, train {results.train_s:.1f}s")
+    if not results.finite.all():
+        print(f"warning: {int((~results.finite).sum())} agent(s) diverged (NaN/inf); their fitness is NaN", file=sys.stderr)
+    print(f"wrote {out}/ (config.json, episodes.csv, curves.csv, summary.json, learning_curve.png)")
+    return 0
+
+
+def cmd_plot(args) -> int:
+    from ermrl import storage
+    from ermrl.analysis.plots import learning_curves
+
+    curves = {}
+    for run in args.runs:
+        if not (run / "curves.csv").is_file():
+            raise ConfigError(f"{run} has no curves.csv; give folders written by `ermrl train` or `ermrl test`")
+        curves.update(storage.read_curves_csv(run / "curves.csv"))
+    title = args.title or storage.run_env_id(args.runs[0]) or ""
+    for path in learning_curves(curves, title, args.out, ("png", "svg")):
+        print(f"wrote {path}")
+    return 0
+
+
+# -- evolve, select, test, report ------------------------------------------------------------------------
+
+
+def cmd_evolve(args) -> int:
+    import dataclasses
+
+    import optuna
+
+    from ermrl import envs, storage
+    from ermrl.cli.progress import EvolutionBar
+    from ermrl.evolution.config import EvolveConfig
+    from ermrl.evolution.evolve import count, estimate_seconds, evolve, make_trainers
+    from ermrl.evolution.study import ATTR, SAMPLERS, make_sampler, open_study
+    from ermrl.experiments import baseline_runs
+
+    if args.sampler not in SAMPLERS:
+        raise ConfigError(f"unknown sampler {args.sampler!r}; choose one of {', '.join(SAMPLERS)}")
+    env_ids = tuple(args.env or ["CartPoleNoVel-v1"])
+    for env_id in env_ids:
+        envs.describe(env_id, args.backend)
+    if args.sampler_seed is not None and args.sampler_seed < 0:
+        raise ConfigError(f"--sampler-seed must be >= 0, got {args.sampler_seed}")
+    config = EvolveConfig(train=options.train_config(args, env_ids[0]), space=options.search_space(args),
+                          trials=args.trials, seeds=args.seeds, sampler=args.sampler, popsize=args.popsize,
+                          sampler_seed=args.sampler_seed, envs=env_ids if len(env_ids) > 1 else (),
+                          normalization=args.normalization)
+    name = args.study or "+".join(env_ids) + f"-{args.reservoirs}res-{args.timesteps // 1000}k"
+    args.study = name
+    storage_url = _storage(args)
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    if config.normalized:
+        config = baseline_runs.with_baselines(config, args.baselines, storage_url, name, print)
+    study = open_study(storage_url, name, make_sampler(args.sampler, config.generation_size, args.sampler_seed),
+                       storage.encode_study_record(config))
+    stored = storage.decode_study_record(study.user_attrs[ATTR])
+    config = dataclasses.replace(config, baselines=stored.baselines)  # a resumed study keeps its constants
+    done = count(study, optuna.trial.TrialState.COMPLETE)
+    print(f"study {name!r} in {storage_url}: {done}/{args.trials} trials done, {config.generation_size} per generation "
+          f"× {args.seeds} seeds × {args.timesteps:,} steps" + (f" on {len(env_ids)} envs" if config.normalized else ""))
+    trainers = make_trainers(config)
+    if done < args.trials and not args.no_estimate:
+        eta = estimate_seconds(trainers, config, args.trials - done)
+        print(f"estimated time: {eta / 60:.1f} min ({-(-(args.trials - done) // config.generation_size)} generations, "
+              "from one measured iteration per env)")
+    with EvolutionBar(args.trials, config.generation_size, len(env_ids), enabled=not args.quiet) as bar:
+        evolve(study, config, trainers, bar.update)
+    best = study.best_trial
+    print(f"best fitness {best.value:.4g} at trial {best.number}: "
+          + ", ".join(f"{k} {v:.4g}" for k, v in best.params.items()))
+    if config.normalized:
+        print("  per env: " + ", ".join(f"{e} {best.user_attrs['env_scores'][e]:.4g} (nScore "
+                                         f"{best.user_attrs['env_nscores'][e]:.3g})" for e in env_ids))
+    print(f"next: ermrl select --study {name}{_storage_flag(args)} ; ermrl test --study {name}{_storage_flag(args)} ; "
+          f"ermrl report --study {name}{_storage_flag(args)}")
+    return 0
+
+
+def cmd_select(args) -> int:
+    from ermrl import storage
+    from ermrl.evolution.selection import select
+    from ermrl.evolution.study import ATTR, load_study
+
+    study = load_study(_storage(args), args.study)
+    config = storage.decode_study_record(study.user_attrs[ATTR])
+    progress, close = _bars(args.quiet)
+    try:
+        s = select(study, config, args.top, args.seeds, progress)
+    finally:
+        close()
+    print(f"re-evaluated the top {len(s.trials)} trials on seeds {s.seeds[0]}..{s.seeds[-1]}:")
+    for number, before, after in zip(s.trials, s.evolution_values, s.values):
+        mark = "  <- selected" if number == s.winner else ""
+        print(f"  trial {number:>4}: evolution {before:9.4g}   fresh seeds {after if after is not None else float('nan'):9.4g}{mark}")
+    print(f"Φ* = trial {s.winner}; `ermrl test --study {args.study}{_storage_flag(args)}` now tests it")
+    return 0
+
+
+def cmd_test(args) -> int:
+    from ermrl import storage
+    from ermrl.analysis.statistics import format_ci
+    from ermrl.evolution.study import ATTR, load_study
+    from ermrl.experiments.evaluation import run_test_phase, test_dir
+
+    test = options.test_config(args)
+    study = load_study(_storage(args), args.study)
+    storage.decode_study_record(study.user_attrs[ATTR])
+    out = test_dir(_run_dir(args), study.user_attrs[ATTR], test.env_id)
+    progress, close = _bars(args.quiet)
+    try:
+        rows = run_test_phase(study, out, test, progress)
+    finally:
+        close()
+    print(f"Φ*: {rows[0]['phi_choice']}; evolved on {', '.join(rows[0]['evolved_on'])}; tested on {rows[0]['env_id']}")
+    for r in rows:
+        div = f"  ({r['diverged']} diverged)" if r["diverged"] else ""
+        print(f"{r['model']:<44} final {_pm(r['final_mean'], r['final_std'])}  IQM "
+              f"{format_ci(r['final_iqm'], r['final_iqm_low'], r['final_iqm_high'])}  AUC {_pm(r['auc_mean'], r['auc_std'])}{div}")
+        for baseline, (p, lo, hi) in r.get("improvement", {}).items():
+            print(f"    P(better than {baseline}) = {p:.2f} [{lo:.2f}, {hi:.2f}]")
+    print(f"wrote {out}/ (curves.csv, summary.json, summary.csv, test_phase.png, test_phase.svg)")
+    return 0
+
+
+def _pm(mean, std) -> str:
+    return "—" if mean is None else f"{mean:8.1f} ± {std:6.1f}"
+
+
+def cmd_report(args) -> int:
+    from ermrl.analysis.report import write_report
+    from ermrl.evolution.study import load_study
+
+    study = load_study(_storage(args), args.study)
+    path = write_report(study, _run_dir(args))
+    print(f"report: {path.resolve()}")
+    return 0
+
+
+def cmd_baselines(args) -> int:
+    from ermrl.experiments import baseline_runs
+
+    baseline_runs.run_baselines(args.env, args, print, _bars(args.quiet)[0])
+    return 0
+
+
+COMMANDS = {"train": cmd_train, "evolve": cmd_evolve, "select": cmd_select, "test": cmd_test,
+            "report": cmd_report, "plot": cmd_plot, "baselines": cmd_baselines}

@@ -1,0 +1,102 @@
+"""``ermrl experiment list|run``: the paper's experiments by name."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ermrl.cli import options
+from ermrl.errors import ConfigError
+
+
+def add_parser(sub, formatter) -> None:
+    p = sub.add_parser("experiment", help="the paper's experiments by name: list them, or run one at a scale",
+                       description="`ermrl experiment list` names every experiment of the paper and its appendix; "
+                                   "`ermrl experiment run NAME --scale smoke|small|paper` runs its evolutions, "
+                                   "selections, test phases and one combined report. Rerunning resumes.",
+                       formatter_class=formatter)
+    esub = p.add_subparsers(dest="experiment_command", required=True, metavar="list|run")
+    lst = esub.add_parser("list", help="name every experiment, its studies and claims", formatter_class=formatter)
+    lst.add_argument("--config", type=Path, default=None, help=argparse_hidden())
+    run = esub.add_parser("run", help="run (or resume) one experiment", formatter_class=formatter)
+    run.add_argument("name", help="experiment name (see `ermrl experiment list`)")
+    run.add_argument("--scale", default="small", choices=["smoke", "small", "paper"],
+                     help="budgets: smoke (seconds a study, for tests), small (a first answer here), paper")
+    run.add_argument("--only", nargs="+", default=(), metavar="STUDY", help="run only these studies of the experiment")
+    run.add_argument("--storage", default=None,
+                     help="Optuna storage URL or journal file for every study (default a journal file in the folder)")
+    run.add_argument("--out", type=Path, default=None, help="folder (default runs/experiments/NAME-SCALE)")
+    run.add_argument("--baselines", type=Path, default=None, metavar="TABLE",
+                     help="baselines table for studies over several envs (default runs/baselines.json over the shipped one)")
+    run.add_argument("--no-estimate", action="store_true", help="do not measure env step costs for the estimate")
+    options.add_options(run, "env", skip=("--timesteps",))
+    options.add_config_option(run)
+    run.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def argparse_hidden():
+    import argparse
+
+    return argparse.SUPPRESS
+
+
+def run_command(args) -> int:
+    from ermrl.experiments import registry
+
+    if args.experiment_command == "list":
+        for e in registry.EXPERIMENTS.values():
+            print(f"{e.name}: {e.title}")
+            print(f"    paper: {e.paper}; claims {', '.join(e.claims)}")
+            print(f"    studies: {', '.join(s.name for s in e.studies)}")
+        print("scales: " + "; ".join(f"{s.name} = {s.description}" for s in registry.SCALES.values()))
+        return 0
+    return _run(args)
+
+
+def _run(args) -> int:
+    import optuna
+
+    from ermrl import envs
+    from ermrl.cli.progress import TrainingBar
+    from ermrl.evolution.study import make_storage
+    from ermrl.experiments import registry, runner
+
+    experiment, scale = registry.get(args.name), registry.get_scale(args.scale)
+    names = {s.name for s in experiment.studies}
+    unknown = [n for n in args.only if n not in names]
+    if unknown:
+        raise ConfigError(f"experiment {experiment.name} has no study {unknown[0]!r}; its studies: {', '.join(sorted(names))}")
+    folder = args.out or runner.experiment_dir(experiment, scale)
+    plans = [p for p in runner.plan(experiment, scale, folder, args.backend, args.env_workers)
+             if not args.only or p.spec.name in args.only]
+    for env_id in sorted({e for p in plans for e in p.config.env_ids + tuple(t.env_id for t in p.tests if t.env_id)}):
+        envs.describe(env_id, args.backend)  # every env exists and its simulator is installed, before any work
+    url = args.storage or runner.default_storage(folder)
+    make_storage(url)
+    done = {}
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    for p in plans:
+        try:
+            study = optuna.load_study(study_name=p.study, storage=make_storage(url))
+            done[p.study] = len(study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,)))
+        except KeyError:
+            pass
+    print(f"experiment {experiment.name} at {scale.name} scale: {len(plans)} studies in {folder} (storage {url})")
+    if not args.no_estimate:
+        print(f"estimated time: {runner.estimate_seconds(plans, done) / 60:.0f} min (rough: nominal throughput, "
+              f"{sum(done.values())} trials already done)")
+
+    def progress(label):
+        bar = TrainingBar(label, enabled=not args.quiet)
+        bar.__enter__()
+        bars.append(bar)
+        return bar.update
+
+    bars: list = []
+    try:
+        report = runner.run_experiment(experiment, scale, folder, url, args.backend, args.env_workers, tuple(args.only),
+                                       print, progress, args.baselines)
+    finally:
+        for bar in bars:
+            bar.__exit__(None, None, None)
+    print(f"report: {report.resolve()}")
+    return 0

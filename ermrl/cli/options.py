@@ -1,0 +1,259 @@
+"""Command-line options, one definition each, taken from the config dataclasses.
+
+An option names the dataclass field it sets: its help is the field's docstring and its default the field's
+default, so ``ermrl train``, ``evolve``, ``baselines`` and ``experiment run`` share one definition of every
+agent, PPO and search option. ``--config FILE.toml`` (or .yaml) gives defaults for any option of a command,
+keyed by the flag's name (``units = 50``, ``ppo-lr = 1e-4``); flags on the command line override it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import functools
+import inspect
+import textwrap
+from pathlib import Path
+
+from ermrl.errors import ConfigError
+
+
+@functools.cache
+def field_docs(cls) -> dict[str, str]:
+    """{field name: the docstring under it} of a dataclass, read from its source."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    body = tree.body[0].body
+    docs = {}
+    for node, after in zip(body, body[1:]):
+        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and isinstance(after, ast.Expr) \
+                and isinstance(after.value, ast.Constant) and isinstance(after.value.value, str):
+            docs[node.target.id] = " ".join(after.value.value.split())
+    return docs
+
+
+@dataclasses.dataclass(frozen=True)
+class Option:
+    """One flag. With ``owner`` and ``field``, its help and default come from that dataclass field."""
+
+    flag: str
+    owner: type | None = None
+    field: str | None = None
+    help: str | None = None
+    """Help text when there is no field, or a short note added before the field's docstring."""
+    default: object = None
+    """Overrides the field's default (e.g. None for 'take the preset's value')."""
+    kwargs: dict = dataclasses.field(default_factory=dict)
+    """argparse extras: type, nargs, choices, action, metavar."""
+
+    @property
+    def dest(self) -> str:
+        return self.flag.lstrip("-").replace("-", "_")
+
+    def field_default(self):
+        if self.owner is None or self.default is not None:
+            return self.default
+        f = {f.name: f for f in dataclasses.fields(self.owner)}[self.field]
+        return f.default if f.default is not dataclasses.MISSING else f.default_factory()
+
+    def add_to(self, parser: argparse.ArgumentParser) -> None:
+        doc = field_docs(self.owner).get(self.field, "") if self.owner else ""
+        text = " ".join(p for p in (self.help, doc) if p).replace("%", "%%")
+        kwargs = dict(self.kwargs)
+        if kwargs.get("action") != "store_true":
+            kwargs.setdefault("default", self.field_default())
+        parser.add_argument(self.flag, help=text, dest=self.dest, **kwargs)
+
+
+def _workers(value: str):
+    if value == "auto":
+        return value
+    try:
+        n = int(value)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"must be 'auto' or an integer >= 0, got {value!r}")
+    return n
+
+
+def _groups() -> dict[str, list[Option]]:
+    """The option groups; imported lazily so that ``ermrl --help`` does not import JAX."""
+    from ermrl.agent import AgentConfig
+    from ermrl.evolution.config import EvolveConfig
+    from ermrl.evolution.search_space import SearchSpace
+    from ermrl.experiments.evaluation import TestConfig
+    from ermrl.ppo.config import PPOConfig
+    from ermrl.reservoir import ReservoirSpec
+    from ermrl.training import TrainConfig
+
+    space = [Option(f"--{b}-{hp}", SearchSpace, hp, help=f"{'lower' if b == 'min' else 'upper'} log-uniform bound of {hp}.",
+                    default=getattr(SearchSpace, hp)[0 if b == "min" else 1], kwargs={"type": float})
+             for hp in ("sr", "lr", "iss") for b in ("min", "max")]
+    return {
+        "env": [Option("--timesteps", TrainConfig, "total_timesteps", kwargs={"type": int}),
+                Option("--backend", TrainConfig, "backend", kwargs={"choices": ["auto", "jax", "host"]}),
+                Option("--env-workers", TrainConfig, "env_workers", kwargs={"type": _workers, "metavar": "N|auto"})],
+        "agent": [
+            Option("--reservoirs", AgentConfig, "reservoirs", kwargs={"type": int}),
+            Option("--units", ReservoirSpec, "units", kwargs={"type": int}),
+            Option("--bias", ReservoirSpec, "bias", kwargs={"choices": ["bernoulli", "none"]}),
+            Option("--feed-action", AgentConfig, "feed_action", kwargs={"choices": ["previous", "none"]}),
+            Option("--skip-connection", AgentConfig, "skip_connection", kwargs={"action": "store_true"}),
+            Option("--observed-units", AgentConfig, "observed_units", kwargs={"type": int}),
+        ],
+        "ppo": [Option("--preset", help="PPO settings: 'sb3' = stable-baselines3's defaults (the paper); "
+                                        "'fast' = 8 envs, 4 epochs.", default="sb3", kwargs={"choices": ["sb3", "fast"]}),
+                Option("--ppo-lr", PPOConfig, "learning_rate", help="Default: the preset's (3e-4).",
+                       kwargs={"type": float, "default": None})],
+        "search": [Option("--trials", EvolveConfig, "trials", kwargs={"type": int}),
+                   Option("--sampler", help="cmaes (Optuna's CmaEsSampler, the paper), random or tpe.",
+                          default="cmaes"),
+                   Option("--popsize", EvolveConfig, "popsize", kwargs={"type": int}),
+                   Option("--sampler-seed", EvolveConfig, "sampler_seed", kwargs={"type": int}),
+                   Option("--fixed-iss", SearchSpace, "fixed_iss", kwargs={"type": float}),
+                   Option("--normalization", EvolveConfig, "normalization",
+                          kwargs={"choices": ["episodic", "reference"]}), *space],
+        "test": [Option("--seeds", TestConfig, "seeds", kwargs={"type": int}),
+                 Option("--timesteps", TestConfig, "timesteps", kwargs={"type": int}),
+                 Option("--ermrl-lr", TestConfig, "ermrl_lrs", kwargs={"type": float, "nargs": "+", "default": None}),
+                 Option("--ppo-lr", TestConfig, "ppo_lr", kwargs={"type": float}),
+                 Option("--env", TestConfig, "env_id", kwargs={}),
+                 Option("--trial", TestConfig, "trial", kwargs={"type": int}),
+                 Option("--auc-steps", TestConfig, "auc_steps", kwargs={"type": int})],
+    }
+
+
+AGENT_DESTS = ("reservoirs", "units", "bias", "feed_action", "skip_connection", "observed_units", "preset",
+               "ppo_lr", "timesteps", "backend", "env_workers")
+"""What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
+
+
+def add_options(parser: argparse.ArgumentParser, *groups: str, skip: tuple[str, ...] = ()) -> None:
+    table = _groups()
+    for group in groups:
+        for option in table[group]:
+            if option.flag not in skip:
+                option.add_to(parser)
+
+
+def add_config_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", type=Path, default=None, metavar="FILE",
+                        help="a TOML or YAML file of option values keyed by flag name (e.g. units = 50); "
+                             "flags given on the command line override it")
+
+
+# -- building configs from parsed options -------------------------------------------------------------
+
+
+def agent_config(args, reservoirs: int | None = None):
+    from ermrl.agent import AgentConfig
+    from ermrl.reservoir import ReservoirSpec
+
+    spec = ReservoirSpec(units=args.units, bias=args.bias)
+    return AgentConfig(reservoirs=args.reservoirs if reservoirs is None else reservoirs, spec=spec,
+                       feed_action=args.feed_action, skip_connection=args.skip_connection,
+                       observed_units=args.observed_units)
+
+
+def ppo_config(args):
+    from ermrl.ppo.config import PRESETS
+
+    ppo = PRESETS[args.preset]
+    return ppo if args.ppo_lr is None else dataclasses.replace(ppo, learning_rate=args.ppo_lr)
+
+
+def train_config(args, env_id: str, reservoirs: int | None = None):
+    from ermrl.training import TrainConfig
+
+    return TrainConfig(env_id=env_id, total_timesteps=args.timesteps, agent=agent_config(args, reservoirs),
+                       ppo=ppo_config(args), backend=args.backend, env_workers=args.env_workers)
+
+
+def search_space(args):
+    from ermrl.evolution.search_space import SearchSpace
+
+    if args.fixed_iss is not None and args.fixed_iss <= 0:
+        raise ConfigError(f"--fixed-iss must be positive, got {args.fixed_iss}")
+    return SearchSpace(args.reservoirs, (args.min_sr, args.max_sr), (args.min_lr, args.max_lr),
+                       (args.min_iss, args.max_iss), args.fixed_iss)
+
+
+def test_config(args):
+    from ermrl.experiments.evaluation import TestConfig
+
+    return TestConfig(seeds=args.seeds, timesteps=args.timesteps, ermrl_lrs=tuple(args.ermrl_lr or ()),
+                      ppo_lr=args.ppo_lr, env_id=args.env, trial=args.trial, auc_steps=args.auc_steps)
+
+
+def effective(args) -> dict:
+    """Every option's final value (config file and flags applied), JSON-ready, for the run's record."""
+    skip = {"command", "func", "config", "experiment_command"}
+    return {k: (str(v) if isinstance(v, Path) else v) for k, v in sorted(vars(args).items()) if k not in skip}
+
+
+# -- config files ----------------------------------------------------------------------------------------
+
+
+def load_config_file(path: Path) -> dict:
+    """The table of a TOML or YAML config file; ConfigError (one line) when it cannot be read."""
+    if not path.is_file():
+        raise ConfigError(f"config file {path} does not exist; give the path of a .toml or .yaml file")
+    text = path.read_text(encoding="utf-8")
+    try:
+        if path.suffix == ".toml":
+            import tomllib
+
+            data = tomllib.loads(text)
+        elif path.suffix in (".yaml", ".yml"):
+            import yaml
+
+            data = yaml.safe_load(text) or {}
+        else:
+            raise ConfigError(f"config file {path} must end in .toml, .yaml or .yml")
+    except ConfigError:
+        raise
+    except Exception as e:  # tomllib.TOMLDecodeError, yaml.YAMLError
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise ConfigError(f"config file {path} is not valid {path.suffix[1:].upper()} ({first})") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"config file {path} must hold a table of option = value pairs")
+    return data
+
+
+def apply_config_file(parser: argparse.ArgumentParser, path: Path) -> None:
+    """Sets the values of ``path`` as ``parser``'s defaults, after checking each key and type."""
+    actions = {a.dest: a for a in parser._actions if a.option_strings and a.dest not in ("help", "config")}
+    values = {}
+    for key, value in load_config_file(path).items():
+        dest = str(key).lstrip("-").replace("-", "_")
+        if dest not in actions:
+            close = sorted(d.replace("_", "-") for d in actions)
+            raise ConfigError(f"config file {path}: unknown option {key!r}; options here: {', '.join(close)}")
+        values[dest] = _convert(actions[dest], value, path, key)
+    parser.set_defaults(**values)
+
+
+def _convert(action: argparse.Action, value, path: Path, key: str):
+    where = f"config file {path}: {key}"
+    if isinstance(action, argparse._StoreTrueAction):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where} must be true or false, got {value!r}")
+        return value
+    many = action.nargs in ("+", "*") or isinstance(action, argparse._AppendAction)
+    items = value if isinstance(value, list) and many else [value]
+    if isinstance(value, list) and not many:
+        raise ConfigError(f"{where} takes one value, got a list {value!r}")
+    out = []
+    for item in items:
+        if action.type is int and isinstance(item, float):
+            raise ConfigError(f"{where} must be an integer, got {item!r}")
+        if action.type is not None and not (isinstance(item, str) and item == "auto"):
+            try:
+                item = action.type(item if not isinstance(item, bool) else "bool")
+            except (TypeError, ValueError, argparse.ArgumentTypeError):
+                raise ConfigError(f"{where} has the wrong type: {item!r}") from None
+        if action.choices is not None and item not in action.choices:
+            raise ConfigError(f"{where} must be one of {', '.join(map(str, action.choices))}, got {item!r}")
+        out.append(item)
+    return out if many else out[0]

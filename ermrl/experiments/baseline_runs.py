@@ -1,0 +1,80 @@
+"""Getting the normalization constants an evolution over several envs needs: from its study when it resumes,
+else from the baselines table, computing (and storing) the ones the table lacks."""
+
+from __future__ import annotations
+
+import dataclasses
+import shlex
+from pathlib import Path
+from typing import Callable
+
+from ermrl.experiments import baselines as bl
+
+
+def _command(argv: list[str]) -> str:
+    return "ermrl " + " ".join(shlex.quote(a) for a in argv)
+
+
+def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path: Path | None,
+           log: Callable[[str], None], progress: Callable | None = None, backend: str = "auto",
+           env_workers="auto", random_episodes: int = 100, recompute: bool = False) -> dict[str, "bl.Baseline"]:
+    """Each env's Baseline at this budget; missing random or PPO entries are computed and saved first."""
+    table_path = table_path or bl.default_table()
+    table = bl.load_table(table_path)
+    changed = False
+    for env_id in env_ids:
+        if recompute or table.random(env_id) is None:
+            log(f"baselines: random agent on {env_id} ({random_episodes} episodes)")
+            r = bl.random_scores(env_id, random_episodes)
+            table.add_random(env_id, r, _command(["baselines", "--env", env_id, "--random-episodes",
+                                                  str(random_episodes)]))
+            changed = True
+        if recompute or table.ppo(env_id, timesteps, seeds, learning_rate) is None:
+            log(f"baselines: vanilla PPO on {env_id} ({seeds} seeds × {timesteps:,} steps, lr {learning_rate:g})")
+            fn = progress(f"PPO baseline {env_id}") if progress else None
+            p = bl.ppo_fitness(env_id, timesteps, seeds, learning_rate, backend, env_workers, fn)
+            table.add_ppo(env_id, p, _command(["baselines", "--env", env_id, "--timesteps", str(timesteps),
+                                               "--seeds", str(seeds), "--ppo-lr", f"{learning_rate:g}"]))
+            changed = True
+        if changed:
+            bl.save_table(table, table_path)
+    out = {}
+    for env_id in env_ids:
+        out[env_id] = bl.resolve(env_id, timesteps, seeds, learning_rate, table)
+    return out
+
+
+def with_baselines(config, table_path: Path | None, storage_url: str, study_name: str,
+                   log: Callable[[str], None], progress: Callable | None = None):
+    """``config`` (an EvolveConfig over several envs) with its constants: the stored ones when the study exists
+    already (a resumed study keeps the constants it started with), else from the table, computed if missing."""
+    from ermrl import storage
+    from ermrl.evolution.study import ATTR, make_storage
+
+    import optuna
+
+    try:
+        study = optuna.load_study(study_name=study_name, storage=make_storage(storage_url))
+        if ATTR in study.user_attrs and study.user_attrs[ATTR].get("baselines"):
+            return dataclasses.replace(config, baselines=storage.decode_study_record(study.user_attrs[ATTR]).baselines)
+    except KeyError:
+        pass
+    found = ensure(config.env_ids, config.train.total_timesteps, config.seeds, config.train.ppo.learning_rate,
+                   table_path, log, progress, config.train.backend, config.train.env_workers)
+    return dataclasses.replace(config, baselines=tuple(found[e] for e in config.env_ids))
+
+
+def run_baselines(env_ids: list[str], args, log: Callable[[str], None], progress: Callable) -> None:
+    """``ermrl baselines``: computes and stores every asked env's constants, then prints them."""
+    from ermrl import envs
+    from ermrl.cli import options
+
+    for env_id in env_ids:
+        envs.describe(env_id, args.backend)
+    lr = options.ppo_config(args).learning_rate
+    found = ensure(env_ids, args.timesteps, args.seeds, lr, args.table, log, progress, args.backend, args.env_workers,
+                   args.random_episodes, args.recompute)
+    for env_id, b in found.items():
+        log(f"{env_id}: random {b.random_return:.4g} per episode ({b.random_step_reward:.4g} per step), "
+            f"PPO {b.ppo:.4g} ({args.seeds} seeds × {args.timesteps:,} steps)")
+    log(f"table: {args.table or bl.default_table()} (extends the shipped table {bl.SHIPPED})")

@@ -1,0 +1,170 @@
+"""The test phase (paper §3, "Evaluation"): Φ* trained on new seeds against the baselines.
+
+Models, all with the evolution's agent and PPO settings:
+- ER-MRL with Φ*, at one or several learning rates (trained as one population: the step size is traced);
+- vanilla PPO on the same (masked) observation, a feedforward policy;
+- PPO with full observations (the unmasked env), when the env is a NoVel variant.
+
+Φ* is the study's selected trial when ``ermrl select`` ran (see :mod:`ermrl.evolution.selection`), else its
+best trial, or any trial asked for. The test env may differ from the evolution's (paper §4.3, generalization):
+the reservoirs get a new input matrix for that env's input size and Φ carries over.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import optuna
+
+from ermrl import envs, storage
+from ermrl.agent import Phi
+from ermrl.analysis import statistics
+from ermrl.envs import masking
+from ermrl.errors import ConfigError
+from ermrl.evolution.selection import chosen_trial
+from ermrl.evolution.study import ATTR
+from ermrl.training import Population, Results, Trainer
+
+FIRST_TEST_SEED = 1000
+"""Test seeds start here, away from the evolution's seeds 0, 1, 2, ... and selection's (new reservoirs,
+policies, envs)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TestConfig:
+    """One test phase."""
+
+    seeds: int = 10
+    """New seeds per model (the paper: 10)."""
+    timesteps: int = 1_000_000
+    """Env steps per agent (the paper: 1M, 3M for LunarLander)."""
+    ermrl_lrs: tuple[float, ...] = ()
+    """PPO learning rates of the ER-MRL model, one model each (the reference tested 3e-4, 1e-4 and 5e-5);
+    empty: the evolution's."""
+    ppo_lr: float | None = None
+    """Learning rate of the PPO baselines (the reference: 3e-4); None: the evolution's."""
+    env_id: str | None = None
+    """Env to test on; None: the evolution's (first) env. Another env tests generalization."""
+    trial: int | None = None
+    """Trial number whose Φ to test; None: the selected Φ* if ``ermrl select`` ran, else the best trial."""
+    auc_steps: int | None = None
+    """Also report the area under the curve over the first this many steps (e.g. 300k, where the paper's
+    locomotion curves separate); None: the whole curve only."""
+
+    def __post_init__(self):
+        if self.seeds < 1:
+            raise ConfigError(f"--seeds must be >= 1, got {self.seeds}")
+        if self.timesteps < 1:
+            raise ConfigError(f"--timesteps must be >= 1, got {self.timesteps}")
+        for lr in self.ermrl_lrs + ((self.ppo_lr,) if self.ppo_lr is not None else ()):
+            if not 0 < lr < 1:
+                raise ConfigError(f"learning rate {lr} is outside (0, 1); the paper uses 3e-4 or 1e-4")
+
+
+def test_dir(run_dir: Path, record: dict, env_id: str | None) -> Path:
+    """``run_dir/test`` on the evolution's env, ``run_dir/test-ENV`` on another one."""
+    evolved_on = record.get("envs") or [record["env_id"]]
+    return run_dir / "test" if env_id is None or (len(evolved_on) == 1 and env_id == evolved_on[0]) \
+        else run_dir / f"test-{env_id}"
+
+
+def summarize(label: str, kind: str, results: Results, auc_steps: int | None = None) -> dict:
+    """Final score (each seed's fitness: the mean of its last 10 episodes) with mean ± std, IQM and its 95%
+    stratified-bootstrap CI, the diverged seeds counted (never dropped silently), and the area under the
+    curve (the curve's mean), over the whole run and, with ``auc_steps``, over its first steps."""
+    fit = results.fitness()
+    steps, curves = results.curves()
+    with np.errstate(all="ignore"):
+        auc = np.nanmean(curves, axis=1)
+        early = np.nanmean(curves[:, steps <= auc_steps], axis=1) if auc_steps else None
+    s = statistics.summarize(fit)
+    row = {"model": label, "kind": kind, "env_id": results.env_id, "n_seeds": results.size,
+           "learning_rate": float(results.learning_rate[0]), "timesteps": results.total_timesteps,
+           "final_mean": s.mean, "final_std": s.std, "final_iqm": s.iqm, "final_iqm_low": s.iqm_low,
+           "final_iqm_high": s.iqm_high, "diverged": s.n_diverged,
+           "auc_mean": _nanstat(np.nanmean, auc), "auc_std": _nanstat(np.nanstd, auc),
+           "per_seed": [None if not np.isfinite(v) else float(v) for v in fit]}
+    if early is not None:
+        row.update(auc_steps=auc_steps, auc_early_mean=_nanstat(np.nanmean, early),
+                   auc_early_std=_nanstat(np.nanstd, early))
+    return row
+
+
+def _nanstat(fn, x) -> float | None:
+    x = np.asarray(x, float)
+    return float(fn(x)) if np.isfinite(x).any() else None
+
+
+def _phi_text(phi: Phi, k: int, trial: int) -> str:
+    if k != 1:
+        return f"trial {trial}"
+    return ", ".join(f"{n} {float(v[0]):.3g}" for n, v in zip(("sr", "lr", "iss"), phi))
+
+
+def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
+                   progress: Callable[[str], Callable] | None = None) -> list[dict]:
+    """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
+    into ``out``. Returns one summary row per model (see :func:`summarize`), each ER-MRL row with its
+    probability of improvement over every PPO baseline."""
+    config = storage.decode_study_record(study.user_attrs[ATTR])
+    trial, phi, how = chosen_trial(study, config, test.trial)
+    env_id = test.env_id or config.env_ids[0]
+    envs.describe(env_id, config.train.backend)  # an unknown id fails before any training
+    base = dataclasses.replace(config.train_for(env_id), total_timesteps=test.timesteps)
+    k = config.space.reservoirs
+    seeds = list(range(FIRST_TEST_SEED, FIRST_TEST_SEED + test.seeds))
+    ermrl_lrs = test.ermrl_lrs or (config.train.ppo.learning_rate,)
+    ppo_lr = config.train.ppo.learning_rate if test.ppo_lr is None else test.ppo_lr
+    base_id, deleted = masking.parse(env_id)
+    plain = dataclasses.replace(base, agent=dataclasses.replace(base.agent, reservoirs=0))
+
+    phi_text = _phi_text(phi, k, trial.number)
+    labels = [f"ER-MRL ({phi_text})" if len(ermrl_lrs) == 1 else f"ER-MRL lr {lr:g} ({phi_text})" for lr in ermrl_lrs]
+    jobs = [("ER-MRL", base, Population.grid(phi, seeds, list(ermrl_lrs), k), labels)]
+    no_phi = Phi(1.0, 1.0, 1.0)
+    jobs.append(("PPO", plain, Population.grid(no_phi, seeds, ppo_lr, 0), ["PPO (same observation)"]))
+    if deleted:
+        jobs.append(("PPO", dataclasses.replace(plain, env_id=base_id), Population.grid(no_phi, seeds, ppo_lr, 0),
+                     ["PPO (full observation)"]))
+
+    curves, seed_map, rows = {}, {}, []
+    for kind, train_config, population, model_labels in jobs:
+        fn = progress(model_labels[0] if len(model_labels) == 1 else kind) if progress else None
+        results = Trainer(train_config).run(population, fn)
+        for m, label in enumerate(model_labels):
+            part = results.select(np.arange(m * len(seeds), (m + 1) * len(seeds)))
+            curves[label] = part.curves()
+            seed_map[label] = part.seeds
+            rows.append(summarize(label, kind, part, test.auc_steps))
+    _add_improvement(rows)
+    evolved_on = list(config.env_ids)
+    for r in rows:
+        r.update(evolved_on=evolved_on, phi_trial=trial.number, phi_choice=how)
+
+    storage.write_curves_csv(out / "curves.csv", curves, seed_map)
+    storage.write_test_summary(out, rows)
+    storage.write_json(out / "test_config.json", {**dataclasses.asdict(test), "phi_trial": trial.number,
+                                                  "phi_choice": how, "evolved_on": evolved_on})
+    from ermrl.analysis.plots import learning_curves
+
+    title = f"{env_id}: test phase, {test.seeds} new seeds"
+    if evolved_on != [env_id]:
+        title += f"\nΦ* evolved on {', '.join(evolved_on)}"
+    learning_curves(curves, title, out / "test_phase", ("png", "svg"))
+    return rows
+
+
+def _add_improvement(rows: list[dict]) -> None:
+    """Adds to each ER-MRL row the probability that it beats each PPO baseline, with its 95% CI."""
+    baselines = [r for r in rows if r["kind"] == "PPO"]
+    for r in rows:
+        if r["kind"] != "ER-MRL":
+            continue
+        r["improvement"] = {}
+        for b in baselines:
+            x, y = (np.array([np.nan if v is None else v for v in row["per_seed"]]) for row in (r, b))
+            if np.isfinite(x).any() and np.isfinite(y).any():
+                r["improvement"][b["model"]] = list(statistics.probability_of_improvement(x, y))

@@ -1,0 +1,157 @@
+"""Runs a named experiment: for each of its studies, the baselines it needs, the evolution, the selection of Φ*
+and the test phases; then one combined report. Every step resumes: a rerun continues the studies and skips
+selections and test phases that are done with the same settings.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Callable
+
+from ermrl import envs, storage
+from ermrl.agent import AgentConfig
+from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.search_space import SearchSpace
+from ermrl.experiments.evaluation import TestConfig
+from ermrl.experiments.registry import Experiment, Scale, StudySpec
+from ermrl.ppo.config import SB3_DEFAULTS
+from ermrl.reservoir import ReservoirSpec
+from ermrl.training import TrainConfig
+
+JAX_RATE = 40_000.0
+"""Nominal agent-steps/s of the JAX backend on 2 cores at a generation's population size (docs/benchmarks.md)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class StudyPlan:
+    """One study of an experiment at one scale, with everything needed to run it."""
+
+    spec: StudySpec
+    study: str
+    """The Optuna study name."""
+    run_dir: Path
+    config: EvolveConfig
+    tests: tuple[TestConfig, ...]
+
+
+def experiment_dir(experiment: Experiment, scale: Scale, root: Path = Path("runs") / "experiments") -> Path:
+    return root / f"{experiment.name}-{scale.name}"
+
+
+def default_storage(folder: Path) -> str:
+    """A journal file: text, append-only, safe to kill at any point, and small enough to commit."""
+    return f"journal:{folder / 'studies.log'}"
+
+
+def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "auto",
+         env_workers: int | str = "auto") -> list[StudyPlan]:
+    plans = []
+    for spec in experiment.studies:
+        agent = AgentConfig(reservoirs=spec.reservoirs, spec=ReservoirSpec(units=spec.units),
+                            observed_units=spec.observed_units)
+        ppo = dataclasses.replace(SB3_DEFAULTS, learning_rate=spec.evolve_lr)
+        train = TrainConfig(env_id=spec.envs[0], total_timesteps=scale.timesteps, agent=agent, ppo=ppo,
+                            backend=backend, env_workers=env_workers)
+        config = EvolveConfig(train=train, space=SearchSpace(spec.reservoirs, fixed_iss=spec.fixed_iss),
+                              trials=scale.trials, seeds=scale.seeds, popsize=scale.popsize,
+                              envs=spec.envs if len(spec.envs) > 1 else ())
+        steps = scale.long_test_timesteps if spec.long_test else scale.test_timesteps
+        tests = tuple(TestConfig(seeds=scale.test_seeds, timesteps=steps, ermrl_lrs=spec.ermrl_lrs, ppo_lr=spec.ppo_lr,
+                                 env_id=None if (e,) == spec.envs else e, auc_steps=min(300_000, steps))
+                      for e in spec.tested_on)
+        name = f"{experiment.name}-{scale.name}-{spec.name}"
+        plans.append(StudyPlan(spec, name, folder / spec.name, config, tests))
+    return plans
+
+
+def _rate(env_id: str, backend: str) -> float:
+    """Rough agent-steps/s of ``env_id`` here: nominal on JAX, from a measured env step on the host."""
+    if envs.resolve_backend(env_id, backend) == "jax":
+        return JAX_RATE
+    from ermrl.envs import host_backend
+
+    step = host_backend.step_seconds(envs.describe(env_id, backend))
+    return min(2.0 / (step + 150e-6), JAX_RATE / 3)  # 2 cores; ~0.15 ms of JAX and IPC per step
+
+
+def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None) -> float:
+    """The experiment's remaining time, from nominal rates and the trials already completed."""
+    done = done or {}
+    rates: dict[str, float] = {}
+    total = 0.0
+    for p in plans:
+        c = p.config
+        remaining = max(c.trials - done.get(p.study, 0), 0)
+        for env_id in c.env_ids:
+            rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
+            total += remaining * c.seeds * c.train.total_timesteps / rate
+        for t in p.tests:
+            env_id = t.env_id or c.env_ids[0]
+            rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
+            models = len(t.ermrl_lrs) + 1 + (1 if "NoVel" in env_id else 0)
+            total += models * t.seeds * t.timesteps / rate
+    return total + 15.0 * len(plans) * 4  # compiles: evolution, selection and the test models
+
+
+def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_url: str | None = None,
+                   backend: str = "auto", env_workers: int | str = "auto", only: tuple[str, ...] = (),
+                   log: Callable[[str], None] = print, progress: Callable | None = None,
+                   baselines_table: Path | None = None) -> Path:
+    """Runs (or resumes) every study of ``experiment`` (or those named in ``only``); returns the report's path.
+    Studies over several envs take their constants from ``baselines_table`` (default runs/baselines.json over
+    the shipped table), computing the missing ones first."""
+    import optuna
+
+    from ermrl.analysis.experiment_report import write_experiment_report
+    from ermrl.evolution.evolve import evolve, make_trainers
+    from ermrl.evolution.selection import load_selection, ranked_trials, select
+    from ermrl.evolution.study import ATTR, make_sampler, open_study
+    from ermrl.experiments import baseline_runs
+    from ermrl.experiments.evaluation import run_test_phase, test_dir
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    plans = [p for p in plan(experiment, scale, folder, backend, env_workers) if not only or p.spec.name in only]
+    url = storage_url or default_storage(folder)
+    for i, p in enumerate(plans):
+        start = time.perf_counter()
+        log(f"[{i + 1}/{len(plans)}] {p.study}: evolve on {', '.join(p.config.env_ids)} ({p.config.trials} trials × "
+            f"{p.config.seeds} seeds × {p.config.train.total_timesteps:,} steps, {p.spec.reservoirs} reservoir(s))")
+        config = p.config
+        if config.normalized:
+            config = baseline_runs.with_baselines(config, baselines_table, url, p.study, log, progress)
+        study = open_study(url, p.study, make_sampler(config.sampler, config.generation_size, config.sampler_seed),
+                           storage.encode_study_record(config))
+        config = dataclasses.replace(config, baselines=storage.decode_study_record(study.user_attrs[ATTR]).baselines)
+        bar = progress(f"evolve {p.spec.name}") if progress else None
+        evolve(study, config, make_trainers(config), (lambda g: bar(g.train) if g.train else None) if bar else None)
+        sel = load_selection(study)
+        top = tuple(t.number for t in ranked_trials(study)[:scale.select_top])
+        if sel is None or sel.trials != top or len(sel.seeds) != scale.select_seeds:
+            sel = select(study, config, scale.select_top, scale.select_seeds, progress)
+        log(f"    Φ* = trial {sel.winner} (selected among the top {len(sel.trials)} on {len(sel.seeds)} fresh seeds)")
+        for t in p.tests:
+            out = test_dir(p.run_dir, study.user_attrs[ATTR], t.env_id)
+            if _test_done(out, t, sel.winner):
+                log(f"    test on {t.env_id or config.env_ids[0]}: done before, kept ({out})")
+                continue
+            rows = run_test_phase(study, out, t, progress)
+            for r in rows:
+                log(f"    test on {r['env_id']}: {r['model']}: final {r['final_mean']:.1f} ± {r['final_std']:.1f}"
+                    if r["final_mean"] is not None else f"    test on {r['env_id']}: {r['model']}: all seeds diverged")
+        from ermrl.analysis.report import write_report
+
+        write_report(study, p.run_dir)
+        log(f"    done in {time.perf_counter() - start:.0f} s")
+    return write_experiment_report(experiment, scale, plans, url, folder)
+
+
+def _test_done(out: Path, test: TestConfig, winner: int) -> bool:
+    path = out / "test_config.json"
+    if not (path.is_file() and (out / "summary.json").is_file()):
+        return False
+    saved = storage.read_json(path)
+    want = {**storage.to_dict(test), "trial": test.trial}
+    return saved.get("phi_trial") == winner and all(saved.get(k) == (list(v) if isinstance(v, tuple) else v)
+                                                     for k, v in want.items())

@@ -1,0 +1,326 @@
+"""Every file ermrl writes or reads, in one place: run folders, curves, summaries, the study record, tables.
+
+Every write goes to a temporary file in the same folder and is renamed over the target, so a crash never leaves
+a half-written file behind. Configs are frozen dataclasses; :func:`to_dict` and :func:`from_dict` are their
+typed codec (nested dataclasses, tuples, unions), and ``from_dict`` refuses unknown or mistyped keys with a
+one-line ConfigError, which is also how config files are checked.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import dataclasses
+import io
+import json
+import os
+import tempfile
+import types
+import typing
+from pathlib import Path
+
+import numpy as np
+
+from ermrl.errors import ConfigError
+
+# -- atomic writes -------------------------------------------------------------------------------------
+
+
+@contextlib.contextmanager
+def atomic_path(path: Path | str):
+    """Yields a temporary path beside ``path``; renames it over ``path`` when the block ends without error."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the final file gets the usual permissions
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def write_text(path: Path | str, text: str) -> Path:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
+
+
+def write_json(path: Path | str, obj) -> Path:
+    return write_text(path, json.dumps(obj, indent=2, default=_json_default) + "\n")
+
+
+def read_json(path: Path | str):
+    return json.loads(Path(path).read_text(encoding="utf-8"))
+
+
+def write_csv(path: Path | str, header: list[str], rows) -> Path:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(rows)
+    return write_text(path, buf.getvalue())
+
+
+def _json_default(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, Path):
+        return str(x)
+    raise TypeError(f"not JSON-serializable: {type(x).__name__}")
+
+
+def _float_or_none(v) -> float | None:
+    return None if v is None or not np.isfinite(v) else float(v)
+
+
+# -- typed config codec ----------------------------------------------------------------------------------
+
+
+def to_dict(config) -> dict:
+    """A JSON-ready dict of a (nested) frozen dataclass config."""
+    return json.loads(json.dumps(dataclasses.asdict(config), default=_json_default))
+
+
+def from_dict(cls, data: dict, where: str = ""):
+    """The dataclass ``cls`` built from ``data`` (as :func:`to_dict` writes it, or a config file's table).
+
+    Missing keys take the dataclass defaults; unknown keys and values of the wrong type raise ConfigError
+    naming the key, e.g. ``train.ppo.n_stpes``.
+    """
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where or cls.__name__} must be a table of keys, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ConfigError(f"unknown key {where + '.' if where else ''}{unknown[0]}; known keys: {', '.join(fields)}")
+    kwargs = {name: _decode(hints[name], value, f"{where + '.' if where else ''}{name}") for name, value in data.items()}
+    return cls(**kwargs)
+
+
+def _decode(tp, value, where: str):
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is typing.Literal:
+        if value not in args:
+            raise ConfigError(f"{where} must be one of {', '.join(map(repr, args))}, got {value!r}")
+        return value
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in (a for a in args if a is not type(None)):
+            try:
+                return _decode(arg, value, where)
+            except ConfigError as e:
+                errors.append(e)
+        raise errors[0]
+    if dataclasses.is_dataclass(tp):
+        return from_dict(tp, value, where)
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{where} must be a list, got {value!r}")
+        item = args[0] if args else typing.Any
+        if len(args) == 2 and args[1] is Ellipsis or len(args) <= 1:
+            return tuple(_decode(item, v, where) for v in value)
+        if len(value) != len(args):
+            raise ConfigError(f"{where} must have {len(args)} values, got {len(value)}")
+        return tuple(_decode(a, v, where) for a, v in zip(args, value))
+    if tp is typing.Any:
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where} must be a number, got {value!r}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where} must be an integer, got {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where} must be true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where} must be a string, got {value!r}")
+        return value
+    return value
+
+
+# -- curves and episodes ---------------------------------------------------------------------------------
+
+Curves = dict[str, tuple[np.ndarray, np.ndarray]]
+"""{model label: (timesteps (I,), values (S, I))}, values the mean return of the last 100 episodes."""
+
+
+def write_curves_csv(path: Path, curves: Curves, seeds: dict[str, np.ndarray]) -> Path:
+    """Long format: model, seed, timestep, value (mean return of the last 100 episodes)."""
+    rows = ([label, int(s), int(t), "" if np.isnan(v) else f"{v:.6g}"]
+            for label, (steps, values) in curves.items() for s, row in zip(seeds[label], values)
+            for t, v in zip(steps, row))
+    return write_csv(path, ["model", "seed", "timestep", "mean_return_100"], rows)
+
+
+def read_curves_csv(path: Path) -> Curves:
+    """Inverse of :func:`write_curves_csv`: {model: (timesteps (I,), values (S, I))}, NaN where a seed has none.
+
+    Raises ConfigError naming the file when it is not a curves file."""
+    cells: dict[str, dict[int, dict[int, float]]] = {}
+    try:
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                val = float(row["mean_return_100"]) if row["mean_return_100"] else np.nan
+                cells.setdefault(row["model"], {}).setdefault(int(row["seed"]), {})[int(row["timestep"])] = val
+    except (KeyError, ValueError, TypeError) as e:
+        raise ConfigError(f"{path} is not a curves file written by ermrl ({type(e).__name__}: {e}); "
+                          "rerun the command that wrote it") from None
+    curves = {}
+    for model, by_seed in cells.items():
+        steps = np.array(sorted({t for s in by_seed.values() for t in s}))
+        curves[model] = (steps, np.array([[s.get(t, np.nan) for t in steps] for s in by_seed.values()]))
+    return curves
+
+
+def write_episodes_csv(path: Path, results, label: str = "") -> Path:
+    """One row per completed episode: model, agent, seed, timestep, return, length."""
+    rows = ([label, a, int(results.seeds[a]), int(t), f"{r:.6g}", int(n)]
+            for a, ep in enumerate(results.episodes) for t, r, n in zip(ep.timestep, ep.ret, ep.length))
+    return write_csv(path, ["model", "agent", "seed", "timestep", "return", "length"], rows)
+
+
+def results_summary(results) -> dict:
+    """JSON-ready per-agent fitness and timing of a :class:`~ermrl.training.results.Results`."""
+    fit = results.fitness()
+    return {
+        "env_id": results.env_id,
+        "total_timesteps": results.total_timesteps,
+        "seeds": results.seeds.tolist(),
+        "fitness": [_float_or_none(v) for v in fit],
+        "mean_fitness": None if np.all(np.isnan(fit)) else float(np.nanmean(fit)),
+        "episodes": [len(e.ret) for e in results.episodes],
+        "diverged": (~results.finite).tolist(),
+        "compile_s": results.compile_s,
+        "train_s": results.train_s,
+        "agent_steps_per_s": results.agent_steps_per_s(),
+    }
+
+
+# -- run folders -----------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainRun:
+    """The files of a run folder written by ``ermrl train``."""
+
+    folder: Path
+
+    @property
+    def config(self) -> Path:
+        return self.folder / "config.json"
+
+    @property
+    def episodes(self) -> Path:
+        return self.folder / "episodes.csv"
+
+    @property
+    def curves(self) -> Path:
+        return self.folder / "curves.csv"
+
+    @property
+    def summary(self) -> Path:
+        return self.folder / "summary.json"
+
+    @property
+    def figure(self) -> Path:
+        return self.folder / "learning_curve.png"
+
+
+def write_train_run(out: Path, config, results, label: str, effective: dict | None = None) -> TrainRun:
+    """Writes config.json (the effective config), episodes.csv, curves.csv and summary.json into ``out``."""
+    run = TrainRun(Path(out))
+    population = {"seeds": results.seeds.tolist(), "phi": {k: v.tolist() for k, v in results.phi.items()},
+                  "learning_rate": results.learning_rate.tolist()}
+    write_json(run.config, {"train": to_dict(config), "population": population, **({"options": effective} if effective else {})})
+    write_episodes_csv(run.episodes, results, label)
+    write_curves_csv(run.curves, {label: results.curves()}, {label: results.seeds})
+    write_json(run.summary, results_summary(results))
+    return run
+
+
+def run_env_id(folder: Path) -> str | None:
+    """The env id a run folder was trained on, from its config.json (None when it has none)."""
+    path = Path(folder) / "config.json"
+    if not path.is_file():
+        return None
+    try:
+        return read_json(path)["train"]["env_id"]
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+# -- test phases -----------------------------------------------------------------------------------------
+
+
+def write_test_summary(out: Path, rows: list[dict]) -> tuple[Path, Path]:
+    """summary.json (every field) and summary.csv (one line per model) of a test phase."""
+    keys = ["model", "env_id", "n_seeds", "learning_rate", "final_mean", "final_std", "final_iqm", "final_iqm_low",
+            "final_iqm_high", "auc_mean", "auc_std", "diverged"]
+    csv_rows = [[_fmt_cell(r.get(k, "")) for k in keys] for r in rows]
+    return write_json(out / "summary.json", rows), write_csv(out / "summary.csv", keys, csv_rows)
+
+
+def _fmt_cell(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return "" if v is None else str(v)
+
+
+def read_test_summary(out: Path) -> list[dict] | None:
+    path = Path(out) / "summary.json"
+    return read_json(path) if path.is_file() else None
+
+
+# -- the study record --------------------------------------------------------------------------------------
+
+STUDY_RECORD_VERSION = 2
+
+
+def encode_study_record(config) -> dict:
+    """The study user attribute ``ermrl`` of an :class:`~ermrl.evolution.config.EvolveConfig`.
+
+    Flat keys a reader can use without decoding (env_id, envs, reservoirs, seeds, timesteps, learning_rate,
+    search_space), plus the nested training config and the multi-env fitness constants."""
+    return {
+        "version": STUDY_RECORD_VERSION, "env_id": config.env_ids[0], "envs": list(config.env_ids),
+        "reservoirs": config.space.reservoirs, "seeds": config.seeds, "timesteps": config.train.total_timesteps,
+        "sampler": config.sampler, "popsize": config.generation_size, "sampler_seed": config.sampler_seed,
+        "learning_rate": config.train.ppo.learning_rate, "search_space": config.space.to_dict(),
+        "train": to_dict(config.train), "trials": config.trials, "normalization": config.normalization,
+        "baselines": [to_dict(b) for b in config.baselines],
+    }
+
+
+def decode_study_record(record: dict):
+    """Inverse of :func:`encode_study_record` (also reads version-1 records, which had one env)."""
+    from ermrl.evolution.config import EvolveConfig
+    from ermrl.evolution.search_space import SearchSpace
+    from ermrl.experiments.baselines import Baseline
+    from ermrl.training import TrainConfig
+
+    try:
+        train = from_dict(TrainConfig, record["train"], "train")
+        return EvolveConfig(
+            train=train, space=SearchSpace.from_dict(record["reservoirs"], record["search_space"]),
+            trials=record["trials"], seeds=record["seeds"], sampler=record["sampler"], popsize=record["popsize"],
+            sampler_seed=record.get("sampler_seed", 0), envs=tuple(record.get("envs", ())),
+            normalization=record.get("normalization", "episodic"),
+            baselines=tuple(from_dict(Baseline, b, "baselines") for b in record.get("baselines", ())))
+    except (KeyError, TypeError) as e:
+        raise ConfigError(f"the study's 'ermrl' record is incomplete or damaged ({type(e).__name__}: {e}); "
+                          "it was not written by this version of `ermrl evolve`") from None

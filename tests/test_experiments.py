@@ -1,0 +1,164 @@
+"""The paper's experiments as software: several envs with normalized scores, selection of Φ*, generalization
+tests on an unseen env, the named experiments at smoke scale, and statistics in the test summaries."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import optuna
+import pytest
+from optuna.trial import TrialState
+
+from ermrl.agent import AgentConfig, Phi
+from ermrl.evolution.study import load_study
+from ermrl.experiments import registry, runner
+from ermrl.experiments.baselines import load_table, nscore, resolve
+from ermrl.experiments.evaluation import summarize
+from ermrl.training import Population, TrainConfig, train
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+
+def cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=900)
+
+
+def test_two_env_evolution_scores_each_env_and_tests_on_a_third(tmp_path):
+    table = tmp_path / "baselines.json"
+    envs = ["CartPoleNoVel-v1", "PendulumNoVel-v1"]
+    r = cli("evolve", "--env", envs[0], "--env", envs[1], "--trials", "2", "--popsize", "2", "--seeds", "1",
+            "--timesteps", "2048", "--fixed-iss", "1.0", "--study", "g", "--out", str(tmp_path), "--baselines", str(table),
+            "--quiet", "--no-estimate")
+    assert r.returncode == 0, r.stderr
+    assert "baselines: vanilla PPO on PendulumNoVel-v1 (1 seeds × 2,048 steps, lr 0.0003)" in r.stdout
+    study = load_study(f"sqlite:///{tmp_path}/study.db", "g")
+    assert study.user_attrs["ermrl"]["envs"] == envs
+    constants = {e: resolve(e, 2048, 1, 3e-4, load_table(table)) for e in envs}
+    trials = [t for t in study.trials if t.state == TrialState.COMPLETE]
+    assert len(trials) == 2
+    for t in trials:
+        assert set(t.user_attrs["env_scores"]) == set(envs) == set(t.user_attrs["env_nscores"])
+        expected = [nscore(t.user_attrs["env_scores"][e], constants[e], "episodic") for e in envs]
+        assert t.user_attrs["env_nscores"] == {e: pytest.approx(v) for e, v in zip(envs, expected)}
+        assert t.value == pytest.approx(np.mean(expected))
+        assert t.user_attrs["env_scores"]["CartPoleNoVel-v1"] > 0 > t.user_attrs["env_scores"]["PendulumNoVel-v1"]
+
+    r = cli("test", "--study", "g", "--out", str(tmp_path), "--env", "MountainCar-v0", "--seeds", "1",
+            "--timesteps", "2048", "--quiet")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads((tmp_path / "test-MountainCar-v0" / "summary.json").read_text())
+    assert [row["kind"] for row in rows] == ["ER-MRL", "PPO"]
+    assert all(row["env_id"] == "MountainCar-v0" and row["evolved_on"] == envs for row in rows)
+    assert "evolved on CartPoleNoVel-v1, PendulumNoVel-v1; tested on MountainCar-v0" in r.stdout
+    assert (tmp_path / "test-MountainCar-v0" / "test_phase.png").stat().st_size > 0
+
+
+def test_select_reevaluates_exactly_the_top_k_and_test_uses_the_winner(tmp_path):
+    base = ["--out", str(tmp_path), "--study", "s"]
+    r = cli("evolve", "--trials", "4", "--popsize", "4", "--seeds", "1", "--timesteps", "2048", "--fixed-iss", "1.0",
+            "--sampler", "random", "--quiet", "--no-estimate", *base)
+    assert r.returncode == 0, r.stderr
+    r = cli("select", "--top", "2", "--seeds", "2", "--quiet", *base)
+    assert r.returncode == 0, r.stderr
+    study = load_study(f"sqlite:///{tmp_path}/study.db", "s")
+    ranked = sorted((t for t in study.trials if t.state == TrialState.COMPLETE), key=lambda t: -t.value)
+    selection = study.user_attrs["selection"]
+    assert selection["trials"] == [t.number for t in ranked[:2]]
+    assert selection["seeds"] == [2000, 2001] and len(selection["per_seed"]) == 2
+    assert selection["winner"] == selection["trials"][int(np.argmax(selection["values"]))]
+    r = cli("test", "--seeds", "1", "--timesteps", "2048", "--quiet", *base)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads((tmp_path / "test" / "summary.json").read_text())
+    assert rows[0]["phi_trial"] == selection["winner"] and "selected by `ermrl select`" in rows[0]["phi_choice"]
+
+
+def test_a_diverged_seed_is_counted_not_dropped():
+    results = train(TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048, agent=AgentConfig(reservoirs=1)),
+                    Population.grid([Phi(0.95, 0.5, 1.0), Phi(1.0, 5.0, 1.0), Phi(0.5, 0.3, 1.0)], 1, 3e-4, 1))
+    assert list(results.finite) == [True, False, True]
+    row = summarize("ER-MRL", "ER-MRL", results)
+    assert row["n_seeds"] == 3 and row["diverged"] == 1 and row["per_seed"][1] is None
+    fit = results.fitness()
+    assert row["final_mean"] == pytest.approx(np.mean(fit[[0, 2]]))
+
+
+def test_experiment_list_names_every_experiment_of_the_paper():
+    r = cli("experiment", "list")
+    assert r.returncode == 0, r.stderr
+    for name in ("partial-observability", "locomotion", "generalization-morphology", "generalization-humanoid",
+                 "hp-map", "reservoir-sizes", "observed-units", "reservoir-count"):
+        assert f"{name}: " in r.stdout
+    gen = registry.get("generalization-morphology")
+    assert {(s.envs, s.test_envs) for s in gen.studies} == {
+        (("HalfCheetah-v5", "Swimmer-v5"), ("Ant-v5",)), (("Ant-v5", "Swimmer-v5"), ("HalfCheetah-v5",)),
+        (("Ant-v5", "HalfCheetah-v5"), ("Swimmer-v5",))}
+    assert {s.units for s in registry.get("reservoir-sizes").studies} == {25, 50, 100, 200, 500, 1000}
+    assert registry.SCALES["paper"].trials == 900 and registry.SCALES["paper"].long_test_timesteps == 3_000_000
+
+
+def test_unknown_experiment_and_study_are_one_line_errors(tmp_path):
+    r = cli("experiment", "run", "generalisation-morphology", cwd=tmp_path)
+    assert r.returncode == 2
+    assert r.stderr == ("ermrl experiment: error: unknown experiment 'generalisation-morphology'; did you mean "
+                        "generalization-morphology? (`ermrl experiment list` names them all)\n")
+    r = cli("experiment", "run", "observed-units", "--only", "10-of-100", cwd=tmp_path)
+    assert r.returncode == 2 and "has no study '10-of-100'; its studies: 100-of-100, 100-of-1000" in r.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("scale", list(registry.SCALES))
+def test_every_experiment_plans_at_every_scale(scale, tmp_path):
+    """Every study of every experiment builds a valid config (env ids exist, options are in range), with the
+    scale's budgets, and a time estimate (without training)."""
+    names = set()
+    for experiment in registry.EXPERIMENTS.values():
+        plans = runner.plan(experiment, registry.get_scale(scale), tmp_path)
+        assert len({p.study for p in plans}) == len(plans) == len(experiment.studies)
+        names |= {p.study for p in plans}
+        for p in plans:
+            assert p.config.trials == registry.SCALES[scale].trials
+            assert p.config.normalized == (len(p.spec.envs) > 1)
+            assert [t.env_id or p.config.env_ids[0] for t in p.tests] == list(p.spec.tested_on)
+    assert len(names) == sum(len(e.studies) for e in registry.EXPERIMENTS.values())
+
+
+def run_smoke(name, tmp_path, only=()):
+    """Runs ``name`` at smoke scale, checks every study's trials, selection and test phases, then checks that a
+    rerun resumes without training anything again."""
+    experiment, scale = registry.get(name), registry.get_scale("smoke")
+    table = tmp_path / "baselines.json"
+    report = runner.run_experiment(experiment, scale, tmp_path, log=lambda s: None, baselines_table=table, only=only)
+    assert report.is_file() and "<h2>Studies</h2>" in report.read_text()
+    url = runner.default_storage(tmp_path)
+    plans = [p for p in runner.plan(experiment, scale, tmp_path) if not only or p.spec.name in only]
+    for plan in plans:
+        study = load_study(url, plan.study)
+        assert sum(t.state == TrialState.COMPLETE for t in study.trials) == scale.trials
+        assert study.user_attrs["selection"]["winner"] in {t.number for t in study.trials}
+        for env_id in plan.spec.tested_on:
+            folder = plan.run_dir / ("test" if (env_id,) == plan.spec.envs else f"test-{env_id}")
+            rows = json.loads((folder / "summary.json").read_text())
+            assert rows[0]["env_id"] == env_id and rows[0]["evolved_on"] == list(plan.spec.envs)
+    # a rerun resumes: no trial is added and no test phase is redone
+    summaries = {p: p.stat().st_mtime_ns for p in tmp_path.glob("*/test*/summary.json")}
+    trials = {p.study: len(load_study(url, p.study).trials) for p in plans}
+    assert runner.run_experiment(experiment, scale, tmp_path, log=lambda s: None, baselines_table=table,
+                                 only=only) == report
+    assert {p: p.stat().st_mtime_ns for p in tmp_path.glob("*/test*/summary.json")} == summaries
+    assert {p.study: len(load_study(url, p.study).trials) for p in plans} == trials
+    return report
+
+
+def test_an_experiment_runs_end_to_end_and_resumes(tmp_path):
+    """The default suite runs one study of one experiment; `make test-slow` runs every experiment (below)."""
+    report = run_smoke("observed-units", tmp_path, only=("100-of-1000",))
+    text = report.read_text()
+    assert "100-of-1000" in text and "Test phase on CartPoleNoVel-v1" in text and "P(improvement)" in text
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(registry.EXPERIMENTS))
+def test_every_experiment_runs_at_smoke_scale(name, tmp_path):
+    run_smoke(name, tmp_path)

@@ -1,0 +1,113 @@
+"""Command-line options come from one definition (the config dataclasses) and config files feed them."""
+
+import argparse
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+
+from ermrl.agent import AgentConfig
+from ermrl.cli import build_parser, parse
+from ermrl.cli.options import AGENT_DESTS, field_docs
+from ermrl.ppo.config import PPOConfig
+from ermrl.reservoir import ReservoirSpec
+from ermrl.training import TrainConfig
+
+
+def subparser(name: str) -> argparse.ArgumentParser:
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices[name]
+
+
+def options_of(parser) -> dict[str, argparse.Action]:
+    return {a.dest: a for a in parser._actions if a.option_strings}
+
+
+def test_every_training_command_takes_every_agent_option_from_one_definition():
+    commands = {name: options_of(subparser(name)) for name in ("train", "evolve", "baselines")}
+    expected_defaults = {"reservoirs": AgentConfig.reservoirs, "units": ReservoirSpec.units, "bias": ReservoirSpec.bias,
+                         "feed_action": AgentConfig.feed_action, "skip_connection": False,
+                         "observed_units": AgentConfig.observed_units, "preset": "sb3", "ppo_lr": None,
+                         "timesteps": TrainConfig.total_timesteps, "backend": TrainConfig.backend,
+                         "env_workers": TrainConfig.env_workers}
+    assert set(expected_defaults) == set(AGENT_DESTS)
+    for dest in AGENT_DESTS:
+        actions = [c[dest] for c in commands.values()]
+        assert len({a.option_strings[0] for a in actions}) == 1, dest
+        assert len({repr(a.default) for a in actions}) == 1, dest
+        assert len({a.help for a in actions}) == 1, dest
+        assert actions[0].default == expected_defaults[dest], dest
+    # the help is the field's docstring
+    assert field_docs(ReservoirSpec)["units"] in commands["evolve"]["units"].help
+    assert field_docs(AgentConfig)["observed_units"] in commands["train"]["observed_units"].help
+    assert field_docs(PPOConfig)["learning_rate"] in commands["evolve"]["ppo_lr"].help
+    # the evolution's options that used to be missing
+    for flag in ("skip_connection", "bias", "observed_units", "preset"):
+        assert flag in commands["evolve"]
+
+
+def test_help_still_shows_defaults():
+    text = subparser("evolve").format_help()
+    for flag in ("--units", "--skip-connection", "--observed-units", "--bias", "--preset", "--normalization",
+                 "--config", "--fixed-iss", "--min-sr"):
+        assert flag in text, flag
+    assert re.search(r"--units UNITS\s+Number of neurons N \(the paper uses\s+100\)\.\s+\(default:\s+100\)", text)
+
+
+def test_config_file_sets_options_and_flags_override_it(tmp_path):
+    toml = tmp_path / "run.toml"
+    toml.write_text('units = 20\nppo-lr = 1e-4\nsr = [0.9]\nskip_connection = true\nenv = "PendulumNoVel-v1"\n')
+    args = parse(["train", "--config", str(toml), "--units", "30"])
+    assert (args.units, args.ppo_lr, args.sr, args.skip_connection, args.env) == (30, 1e-4, [0.9], True,
+                                                                                   "PendulumNoVel-v1")
+    yaml = tmp_path / "run.yaml"
+    yaml.write_text("trials: 12\nenv: [CartPoleNoVel-v1, PendulumNoVel-v1]\nnormalization: reference\n")
+    args = parse(["evolve", "--config", str(yaml)])
+    assert (args.trials, args.env, args.normalization) == (12, ["CartPoleNoVel-v1", "PendulumNoVel-v1"], "reference")
+
+
+def ermrl(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
+
+
+def test_the_run_folder_stores_the_effective_config(tmp_path):
+    toml = tmp_path / "run.toml"
+    toml.write_text("units = 20\nseeds = 1\ntimesteps = 2048\n")
+    out = tmp_path / "run"
+    r = ermrl("train", "--config", str(toml), "--units", "30", "--out", str(out), "--quiet")
+    assert r.returncode == 0, r.stderr
+    config = json.loads((out / "config.json").read_text())
+    assert config["train"]["agent"]["spec"]["units"] == 30 and config["train"]["total_timesteps"] == 2048
+    assert config["options"]["units"] == 30 and config["options"]["seeds"] == 1
+
+
+@pytest.mark.parametrize("text, suffix, message", [
+    ("unitz = 20\n", ".toml", "unknown option 'unitz'; options here: "),
+    ('units = "many"\n', ".toml", "units has the wrong type: 'many'"),
+    ("units = 2.5\n", ".toml", "units must be an integer, got 2.5"),
+    ('bias = "gaussian"\n', ".toml", "bias must be one of bernoulli, none, got 'gaussian'"),
+    ("units = [1, 2]\n", ".toml", "units takes one value, got a list [1, 2]"),
+    ("skip-connection = 1\n", ".toml", "skip-connection must be true or false, got 1"),
+    ("units = \n", ".toml", "is not valid TOML"),
+    ("- a\n- b\n", ".yaml", "must hold a table of option = value pairs"),
+    ("units: 2\n", ".ini", "must end in .toml, .yaml or .yml"),
+])
+def test_bad_config_files_are_one_line_errors(tmp_path, text, suffix, message):
+    path = tmp_path / f"c{suffix}"
+    path.write_text(text)
+    r = ermrl("train", "--config", str(path), "--timesteps", "2048", cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.startswith(f"ermrl train: error: config file {path}"), r.stderr
+    assert message in r.stderr and r.stderr.count("\n") == 1
+    assert not (tmp_path / "runs").exists()
+
+
+def test_missing_config_file(tmp_path):
+    r = ermrl("evolve", "--config", str(tmp_path / "nope.toml"), cwd=tmp_path)
+    assert r.returncode == 2
+    assert r.stderr == (f"ermrl evolve: error: config file {tmp_path / 'nope.toml'} does not exist; "
+                        "give the path of a .toml or .yaml file\n")

@@ -1,0 +1,62 @@
+"""The statistics equal rliable's own on fixed arrays, and count diverged seeds."""
+
+import numpy as np
+import pytest
+import scipy.stats
+from rliable import library, metrics
+
+from ermrl.analysis import statistics
+
+SCORES = np.random.default_rng(0).normal(100.0, 30.0, size=12)
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def rliable_iqm(scores, reps, seed):
+    np.random.seed(seed)  # rliable's stratified bootstrap draws from NumPy's global generator
+    point, interval = library.get_interval_estimates({"m": scores}, lambda x: np.array([metrics.aggregate_iqm(x)]),
+                                                     reps=reps, random_state=np.random.RandomState(seed))
+    return point["m"][0], interval["m"][0, 0], interval["m"][1, 0]
+
+
+def test_iqm_and_its_interval_equal_rliables():
+    s = statistics.summarize(SCORES, reps=500, seed=3)
+    assert (s.iqm, s.iqm_low, s.iqm_high) == pytest.approx(rliable_iqm(SCORES[:, None], 500, 3), abs=1e-12)
+    assert s.iqm == pytest.approx(scipy.stats.trim_mean(SCORES, 0.25))  # an independent check (n divisible by 4)
+    assert s.iqm_low < s.iqm < s.iqm_high
+    assert (s.mean, s.std, s.n, s.n_diverged) == (pytest.approx(SCORES.mean()), pytest.approx(SCORES.std()), 12, 0)
+
+
+def test_probability_of_improvement_equals_rliables():
+    x, y = SCORES[:6, None], SCORES[6:, None] + 20
+    np.random.seed(1)
+    point, interval = library.get_interval_estimates({"xy": [x, y]}, metrics.probability_of_improvement, reps=400,
+                                                     random_state=np.random.RandomState(1))
+    ours = statistics.probability_of_improvement(SCORES[:6], SCORES[6:] + 20, reps=400, seed=1)
+    assert ours == pytest.approx((point["xy"], *np.ravel(interval["xy"])), abs=1e-12)
+    assert statistics.probability_of_improvement([5.0, 6.0, 7.0], [1.0, 2.0], reps=200)[0] == 1.0
+    assert statistics.probability_of_improvement(SCORES, SCORES, reps=200)[0] == 0.5
+
+
+def test_a_diverged_seed_is_counted_and_left_out():
+    s = statistics.summarize([10.0, None, 30.0, float("nan"), 20.0], reps=200)
+    assert (s.n, s.n_diverged) == (5, 2)
+    assert s.mean == pytest.approx(20.0) and s.std == pytest.approx(np.std([10.0, 30.0, 20.0]))
+    p = statistics.probability_of_improvement([3.0, None, 4.0], [1.0, 2.0], reps=200)
+    assert p[0] == 1.0
+    none = statistics.summarize([None, float("nan")])
+    assert (none.n, none.n_diverged, none.mean, none.iqm) == (2, 2, None, None)
+
+
+def test_aggregate_iqm_over_tasks_equals_rliables(tmp_path):
+    scores = {"ER-MRL": np.random.default_rng(1).normal(1.2, 0.3, (5, 3)),
+              "PPO": np.random.default_rng(2).normal(1.0, 0.2, (5, 3))}
+    ours = statistics.aggregate_iqm(scores, reps=300, seed=4)
+    for m, s in scores.items():
+        assert ours[m] == pytest.approx(rliable_iqm(s, 300, 4), abs=1e-12)
+    path = statistics.performance_profile(scores, tmp_path / "profile.png", reps=100)
+    assert path.read_bytes()[:8] == PNG
+
+
+def test_format_ci():
+    assert statistics.format_ci(412.34, 388.0, 430.06) == "412.3 [388.0, 430.1]"
+    assert statistics.format_ci(None, None, None) == "—"
