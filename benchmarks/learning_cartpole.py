@@ -15,7 +15,7 @@ from pathlib import Path
 import ermrl  # noqa: F401
 from ermrl.agent import AgentConfig, Phi
 from ermrl.analysis.plots import learning_curves
-from ermrl.train import Population, TrainConfig, train
+from ermrl.training import Population, TrainConfig, train
 
 MODELS = {
     "ER-MRL (1 reservoir, sr 0.95, lr 0.5)": ("CartPoleNoVel-v1", 1),

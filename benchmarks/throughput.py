@@ -35,7 +35,7 @@ def measure(env_id: str, size: int, iterations: int, units: int) -> dict:
     import ermrl  # noqa: F401  (one JAX device per core)
     from ermrl.agent import AgentConfig, Phi
     from ermrl.reservoir import ReservoirSpec
-    from ermrl.train import Population, TrainConfig, Trainer
+    from ermrl.training import Population, TrainConfig, Trainer
 
     config = TrainConfig(env_id=env_id, total_timesteps=iterations * 2048,
                          agent=AgentConfig(reservoirs=1, spec=ReservoirSpec(units=units)))
