@@ -310,7 +310,7 @@ def decode_study_record(record: dict):
     """Inverse of :func:`encode_study_record` (also reads version-1 records, which had one env)."""
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.search_space import SearchSpace
-    from ermrl.experiments.baselines import Baseline
+    from ermrl.evolution.scoring import Baseline
     from ermrl.training import TrainConfig
 
     try:

@@ -72,10 +72,11 @@ def normalized_test_scores(rows_by_env: dict[str, list[dict]], random_returns: d
     return {k: np.stack(v, axis=1) for k, v in kinds.items() if len(v) == n and n > 0}
 
 
-def write_experiment_report(experiment, scale, plans, storage_url: str, folder: Path) -> Path:
-    """Writes ``folder/report.html`` and returns its path."""
+def write_experiment_report(experiment, scale, plans, storage_url: str, folder: Path,
+                            random_returns: dict[str, float] | None = None) -> Path:
+    """Writes ``folder/report.html`` and returns its path. ``random_returns`` (env id -> the random agent's mean
+    episode return) normalizes the test phases' final scores for the aggregate over envs."""
     from ermrl.evolution.study import load_study
-    from ermrl.experiments.baselines import load_table
 
     folder = Path(folder)
     title = f"ER-MRL experiment {experiment.name} ({scale.name} scale)"
@@ -98,9 +99,7 @@ def write_experiment_report(experiment, scale, plans, storage_url: str, folder: 
             rows_by_env.setdefault(rows[0]["env_id"], rows) if rows else None
     parts += ["<h2>Studies</h2>", table(["study", "evolved on", "K", "units", "completed trials", "best fitness",
                                          "Φ* (selected trial)"], summary)]
-    table_ = load_table()
-    random_returns = {e: r.mean_return for e in rows_by_env if (r := table_.random(e)) is not None}
-    scores = normalized_test_scores(rows_by_env, random_returns)
+    scores = normalized_test_scores(rows_by_env, random_returns or {})
     if scores and next(iter(scores.values())).shape[1] > 1:
         agg = statistics.aggregate_iqm(scores)
         parts += ["<h2>Aggregate over envs</h2>",

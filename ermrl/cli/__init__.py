@@ -4,6 +4,7 @@ from a config file), builds configs and calls the library."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from ermrl.errors import ConfigError
@@ -64,6 +65,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into a command that stopped reading (e.g. `| head`)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
 
 
 if __name__ == "__main__":

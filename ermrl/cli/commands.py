@@ -327,9 +327,24 @@ def cmd_report(args) -> int:
 
 
 def cmd_baselines(args) -> int:
-    from ermrl.experiments import baseline_runs
+    from ermrl import envs
+    from ermrl.experiments import baseline_runs, baselines
 
-    baseline_runs.run_baselines(args.env, args, print, _bars(args.quiet)[0])
+    for env_id in args.env:
+        envs.describe(env_id, args.backend)
+    if args.seeds < 1:
+        raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
+    lr = options.ppo_config(args).learning_rate
+    progress, close = _bars(args.quiet)
+    try:
+        found = baseline_runs.ensure(args.env, args.timesteps, args.seeds, lr, args.table, print, progress,
+                                     args.backend, args.env_workers, args.random_episodes, args.recompute)
+    finally:
+        close()
+    for env_id, b in found.items():
+        print(f"{env_id}: random {b.random_return:.4g} per episode ({b.random_step_reward:.4g} per step), "
+              f"PPO {b.ppo:.4g} ({args.seeds} seeds × {args.timesteps:,} steps, lr {lr:g})")
+    print(f"table: {args.table or baselines.default_table()} (over the shipped table {baselines.SHIPPED})")
     return 0
 
 

@@ -56,7 +56,7 @@ def _run(args) -> int:
     import optuna
 
     from ermrl import envs
-    from ermrl.cli.progress import TrainingBar
+    from ermrl.cli.commands import _bars
     from ermrl.evolution.study import make_storage
     from ermrl.experiments import registry, runner
 
@@ -85,18 +85,11 @@ def _run(args) -> int:
         print(f"estimated time: {runner.estimate_seconds(plans, done) / 60:.0f} min (rough: nominal throughput, "
               f"{sum(done.values())} trials already done)")
 
-    def progress(label):
-        bar = TrainingBar(label, enabled=not args.quiet)
-        bar.__enter__()
-        bars.append(bar)
-        return bar.update
-
-    bars: list = []
+    progress, close = _bars(args.quiet)
     try:
         report = runner.run_experiment(experiment, scale, folder, url, args.backend, args.env_workers, tuple(args.only),
                                        print, progress, args.baselines)
     finally:
-        for bar in bars:
-            bar.__exit__(None, None, None)
+        close()
     print(f"report: {report.resolve()}")
     return 0

@@ -11,7 +11,7 @@ import dataclasses
 
 from ermrl.errors import ConfigError
 from ermrl.evolution.search_space import SearchSpace
-from ermrl.experiments.baselines import NORMALIZATIONS, Baseline
+from ermrl.evolution.scoring import NORMALIZATIONS, Baseline
 from ermrl.training import TrainConfig
 
 

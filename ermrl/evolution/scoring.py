@@ -6,7 +6,37 @@ import dataclasses
 
 import numpy as np
 
-from ermrl.experiments.baselines import nscore
+from ermrl.errors import ConfigError
+
+NORMALIZATIONS = ("episodic", "reference")
+"""'episodic': random = the random agent's mean episode return; 'reference': the reference code's mean per-step
+reward of the random agent (mixed with episodic PPO scores, a bug kept behind this switch)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Baseline:
+    """The normalization constants of one env, as an evolution stores them in its study (paper App. "Normalized
+    scores"; computed by :mod:`ermrl.experiments.baselines`)."""
+
+    env_id: str
+    random_return: float
+    """The random agent's mean episode return."""
+    random_step_reward: float
+    """The random agent's mean per-step reward (what the reference code used)."""
+    ppo: float
+    """Vanilla PPO's fitness at the evolution's budget, seeds and learning rate."""
+
+
+def nscore(score, baseline: Baseline, normalization: str = "episodic"):
+    """(score − random) / (ppo − random): 0 for the random agent, 1 for vanilla PPO. ``score`` a float or array."""
+    if normalization not in NORMALIZATIONS:
+        raise ConfigError(f"unknown normalization {normalization!r}; choose one of {', '.join(NORMALIZATIONS)}")
+    random = baseline.random_return if normalization == "episodic" else baseline.random_step_reward
+    if baseline.ppo == random:
+        raise ConfigError(f"{baseline.env_id}: PPO scores the same as the random agent ({random:g}), so no score can "
+                          "be normalized; recompute the baselines at a larger budget (ermrl baselines --timesteps ...)")
+    return (np.asarray(score, float) - random) / (baseline.ppo - random) if np.ndim(score) else \
+        (float(score) - random) / (baseline.ppo - random)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -62,19 +62,3 @@ def with_baselines(config, table_path: Path | None, storage_url: str, study_name
     found = ensure(config.env_ids, config.train.total_timesteps, config.seeds, config.train.ppo.learning_rate,
                    table_path, log, progress, config.train.backend, config.train.env_workers)
     return dataclasses.replace(config, baselines=tuple(found[e] for e in config.env_ids))
-
-
-def run_baselines(env_ids: list[str], args, log: Callable[[str], None], progress: Callable) -> None:
-    """``ermrl baselines``: computes and stores every asked env's constants, then prints them."""
-    from ermrl import envs
-    from ermrl.cli import options
-
-    for env_id in env_ids:
-        envs.describe(env_id, args.backend)
-    lr = options.ppo_config(args).learning_rate
-    found = ensure(env_ids, args.timesteps, args.seeds, lr, args.table, log, progress, args.backend, args.env_workers,
-                   args.random_episodes, args.recompute)
-    for env_id, b in found.items():
-        log(f"{env_id}: random {b.random_return:.4g} per episode ({b.random_step_reward:.4g} per step), "
-            f"PPO {b.ppo:.4g} ({args.seeds} seeds × {args.timesteps:,} steps)")
-    log(f"table: {args.table or bl.default_table()} (extends the shipped table {bl.SHIPPED})")

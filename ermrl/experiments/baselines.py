@@ -21,8 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from ermrl.errors import ConfigError
+from ermrl.evolution.scoring import NORMALIZATIONS, Baseline, nscore
 
-NORMALIZATIONS = ("episodic", "reference")
+__all__ = ["NORMALIZATIONS", "Baseline", "BaselineTable", "PPOScore", "RandomScore", "load_table", "nscore",
+           "ppo_fitness", "random_scores", "resolve", "save_table"]
+
 SHIPPED = Path(__file__).resolve().parent.parent / "data" / "baselines.json"
 """The table that ships with ermrl (random agents of the paper's envs, PPO at the paper's budget)."""
 
@@ -54,16 +57,6 @@ class PPOScore:
     mean: float
     std: float
     per_seed: tuple[float | None, ...]
-
-
-@dataclasses.dataclass(frozen=True)
-class Baseline:
-    """The normalization constants of one env, as an evolution stores them in its study."""
-
-    env_id: str
-    random_return: float
-    random_step_reward: float
-    ppo: float
 
 
 def random_scores(env_id: str, episodes: int = 100, seed: int = 0) -> RandomScore:
@@ -110,18 +103,6 @@ def ppo_fitness(env_id: str, timesteps: int, seeds: int, learning_rate: float = 
         raise ConfigError(f"vanilla PPO finished no episode on {env_id} in {timesteps} steps; use a larger budget")
     return PPOScore(seeds, timesteps, learning_rate, float(np.nanmean(fit)), float(np.nanstd(fit)),
                     tuple(None if not np.isfinite(v) else float(v) for v in fit))
-
-
-def nscore(score, baseline: Baseline, normalization: str = "episodic"):
-    """(score − random) / (ppo − random): 0 for the random agent, 1 for vanilla PPO. ``score`` a float or array."""
-    if normalization not in NORMALIZATIONS:
-        raise ConfigError(f"unknown normalization {normalization!r}; choose one of {', '.join(NORMALIZATIONS)}")
-    random = baseline.random_return if normalization == "episodic" else baseline.random_step_reward
-    if baseline.ppo == random:
-        raise ConfigError(f"{baseline.env_id}: PPO scores the same as the random agent ({random:g}), so no score can "
-                          "be normalized; recompute the baselines at a larger budget (ermrl baselines --timesteps ...)")
-    return (np.asarray(score, float) - random) / (baseline.ppo - random) if np.ndim(score) else \
-        (float(score) - random) / (baseline.ppo - random)
 
 
 # -- tables ------------------------------------------------------------------------------------------------

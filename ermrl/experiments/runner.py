@@ -108,7 +108,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
     from ermrl.evolution.evolve import evolve, make_trainers
     from ermrl.evolution.selection import load_selection, ranked_trials, select
     from ermrl.evolution.study import ATTR, make_sampler, open_study
-    from ermrl.experiments import baseline_runs
+    from ermrl.experiments import baseline_runs, baselines
     from ermrl.experiments.evaluation import run_test_phase, test_dir
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -144,7 +144,10 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
 
         write_report(study, p.run_dir)
         log(f"    done in {time.perf_counter() - start:.0f} s")
-    return write_experiment_report(experiment, scale, plans, url, folder)
+    table = baselines.load_table(baselines_table)
+    tested = {t.env_id or p.config.env_ids[0] for p in plans for t in p.tests}
+    randoms = {e: r.mean_return for e in tested if (r := table.random(e)) is not None}
+    return write_experiment_report(experiment, scale, plans, url, folder, randoms)
 
 
 def _test_done(out: Path, test: TestConfig, winner: int) -> bool:
