@@ -30,7 +30,7 @@ def test_two_env_evolution_scores_each_env_and_tests_on_a_third(tmp_path):
     envs = ["CartPoleNoVel-v1", "PendulumNoVel-v1"]
     r = cli("evolve", "--env", envs[0], "--env", envs[1], "--trials", "2", "--popsize", "2", "--seeds", "1",
             "--timesteps", "2048", "--fixed-iss", "1.0", "--study", "g", "--out", str(tmp_path), "--baselines", str(table),
-            "--quiet", "--no-estimate")
+            "--allow-weak-baselines", "--quiet", "--no-estimate")
     assert r.returncode == 0, r.stderr
     assert "baselines: vanilla PPO on PendulumNoVel-v1 (1 seeds × 2,048 steps, lr 0.0003)" in r.stdout
     study = load_study(f"sqlite:///{tmp_path}/study.db", "g")
@@ -53,6 +53,25 @@ def test_two_env_evolution_scores_each_env_and_tests_on_a_third(tmp_path):
     assert all(row["env_id"] == "MountainCar-v0" and row["evolved_on"] == envs for row in rows)
     assert "evolved on CartPoleNoVel-v1, PendulumNoVel-v1; tested on MountainCar-v0" in r.stdout
     assert (tmp_path / "test-MountainCar-v0" / "test_phase.png").stat().st_size > 0
+
+
+def test_evolution_refuses_constants_where_ppo_does_not_beat_random(tmp_path):
+    table = tmp_path / "baselines.json"
+    from ermrl.experiments.baselines import BaselineTable, PPOScore, save_table
+
+    t = load_table(table)
+    assert isinstance(t, BaselineTable)
+    for env, mean in (("CartPoleNoVel-v1", 20.0), ("PendulumNoVel-v1", -900.0)):  # random: 23.7 and -1207.6
+        t.add_ppo(env, PPOScore(1, 2048, 3e-4, mean, 0.0, (mean,)), "test")
+    save_table(t, table)
+    r = cli("evolve", "--env", "CartPoleNoVel-v1", "--env", "PendulumNoVel-v1", "--trials", "2", "--popsize", "2",
+            "--seeds", "1", "--timesteps", "2048", "--study", "w", "--out", str(tmp_path), "--baselines", str(table),
+            "--quiet", "--no-estimate")
+    assert r.returncode == 2
+    assert r.stderr == ("ermrl evolve: error: on CartPoleNoVel-v1, vanilla PPO (20) does not beat the random agent "
+                        "(23.68) at this budget, so nScore would reward scores below random; use a larger --timesteps, "
+                        "drop the env, or pass --allow-weak-baselines to go on anyway\n")
+    assert not (tmp_path / "study.db").exists()
 
 
 def test_select_reevaluates_exactly_the_top_k_and_test_uses_the_winner(tmp_path):

@@ -39,6 +39,9 @@ def add_parsers(sub, formatter) -> None:
     options.add_options(p, "env", "agent", "ppo", "search")
     p.add_argument("--baselines", type=Path, default=None, metavar="TABLE",
                    help="baselines table (default runs/baselines.json over the shipped one); several envs only")
+    p.add_argument("--allow-weak-baselines", action="store_true",
+                   help="go on when vanilla PPO does not beat the random agent on an env at this budget (nScore is "
+                        "then meaningless there); for wiring checks only")
     _study_location(p, required=False)
     p.add_argument("--no-estimate", action="store_true", help="skip the warm-up that estimates the total time")
     _common(p)
@@ -240,7 +243,8 @@ def cmd_evolve(args) -> int:
     storage_url = _storage(args)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     if config.normalized:
-        config = baseline_runs.with_baselines(config, args.baselines, storage_url, name, print)
+        config = baseline_runs.with_baselines(config, args.baselines, storage_url, name, print,
+                                              allow_weak=args.allow_weak_baselines)
     study = open_study(storage_url, name, make_sampler(args.sampler, config.generation_size, args.sampler_seed),
                        storage.encode_study_record(config))
     stored = storage.decode_study_record(study.user_attrs[ATTR])

@@ -8,6 +8,7 @@ import shlex
 from pathlib import Path
 from typing import Callable
 
+from ermrl.errors import ConfigError
 from ermrl.experiments import baselines as bl
 
 
@@ -44,21 +45,37 @@ def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path
     return out
 
 
+def check_informative(baselines, normalization: str) -> None:
+    """Refuses constants where vanilla PPO does not beat the random agent: there nScore's denominator is zero
+    or negative, so maximizing it would reward scores *below* random (Ant-v5 at 50k steps is such a case:
+    surviving longer costs more control cost than a random agent's early falls)."""
+    weak = [b for b in baselines
+            if b.ppo <= (b.random_return if normalization == "episodic" else b.random_step_reward)]
+    if weak:
+        b = weak[0]
+        rnd = b.random_return if normalization == "episodic" else b.random_step_reward
+        raise ConfigError(f"on {b.env_id}, vanilla PPO ({b.ppo:.4g}) does not beat the random agent ({rnd:.4g}) at this "
+                          "budget, so nScore would reward scores below random; use a larger --timesteps, drop the env, "
+                          "or pass --allow-weak-baselines to go on anyway")
+
+
 def with_baselines(config, table_path: Path | None, storage_url: str, study_name: str,
-                   log: Callable[[str], None], progress: Callable | None = None):
+                   log: Callable[[str], None], progress: Callable | None = None, allow_weak: bool = False):
     """``config`` (an EvolveConfig over several envs) with its constants: the stored ones when the study exists
-    already (a resumed study keeps the constants it started with), else from the table, computed if missing."""
+    already (a resumed study keeps the constants it started with), else from the table, computed if missing.
+    Unless ``allow_weak``, refuses constants where PPO does not beat the random agent."""
     from ermrl import storage
-    from ermrl.evolution.study import ATTR, make_storage
+    from ermrl.evolution.study import ATTR, load_study
 
-    import optuna
-
-    try:
-        study = optuna.load_study(study_name=study_name, storage=make_storage(storage_url))
-        if ATTR in study.user_attrs and study.user_attrs[ATTR].get("baselines"):
-            return dataclasses.replace(config, baselines=storage.decode_study_record(study.user_attrs[ATTR]).baselines)
-    except KeyError:
+    try:  # looking creates nothing
+        record = load_study(storage_url, study_name).user_attrs[ATTR]
+        if record.get("baselines"):
+            return dataclasses.replace(config, baselines=storage.decode_study_record(record).baselines)
+    except ConfigError:  # no such study yet
         pass
     found = ensure(config.env_ids, config.train.total_timesteps, config.seeds, config.train.ppo.learning_rate,
                    table_path, log, progress, config.train.backend, config.train.env_workers)
-    return dataclasses.replace(config, baselines=tuple(found[e] for e in config.env_ids))
+    constants = tuple(found[e] for e in config.env_ids)
+    if not allow_weak:
+        check_informative(constants, config.normalization)
+    return dataclasses.replace(config, baselines=constants)
