@@ -80,7 +80,8 @@ SCALES = {
                    test_timesteps=2048, long_test_timesteps=2048, description="wiring check: one tiny generation"),
     "small": Scale("small", trials=18, seeds=2, timesteps=50_000, popsize=None, select_top=3, select_seeds=3,
                    test_seeds=5, test_timesteps=200_000, long_test_timesteps=500_000,
-                   description="3 CMA-ES generations, 2 seeds × 50k; test 5 seeds × 200k"),
+                   description="18 trials (2–3 CMA-ES generations), 2 seeds × 50k; select the top 3 on 3 seeds; "
+                               "test 5 seeds × 200k (LunarLander 500k)"),
     "paper": Scale("paper", trials=900, seeds=3, timesteps=300_000, popsize=None, select_top=5, select_seeds=5,
                    test_seeds=10, test_timesteps=1_000_000, long_test_timesteps=3_000_000,
                    description="the paper: 900 trials, 3 seeds × 300k; test 10 seeds × 1M (LunarLander 3M)"),
