@@ -68,7 +68,7 @@ def test_baselines_command_stores_both_constants_with_provenance(tmp_path):
 
     table = tmp_path / "t.json"
     r = subprocess.run([sys.executable, "-m", "ermrl.cli", "baselines", "--env", "CartPole-v1", "--timesteps", "2048",
-                        "--seeds", "1", "--random-episodes", "50", "--table", str(table), "--quiet"],
+                        "--seeds", "1", "--random-episodes", "50", "--table", str(table), "--recompute", "--quiet"],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     saved = json.loads(table.read_text())
@@ -79,3 +79,9 @@ def test_baselines_command_stores_both_constants_with_provenance(tmp_path):
     for entry in (random, ppo):
         assert entry["ermrl_version"] == ermrl.__version__ and entry["date"] and entry["command"].startswith("ermrl baselines")
     assert "CartPole-v1: random" in r.stdout
+    # without --recompute, the shipped random constant is used and only what is missing is computed
+    other = tmp_path / "other.json"
+    r = subprocess.run([sys.executable, "-m", "ermrl.cli", "baselines", "--env", "CartPole-v1", "--timesteps", "2048",
+                        "--seeds", "1", "--table", str(other), "--quiet"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(other.read_text())["random"] == {} and "random agent" not in r.stdout
