@@ -170,11 +170,14 @@ def run_smoke(name, tmp_path, only=()):
     return report
 
 
-def test_an_experiment_runs_end_to_end_and_resumes(tmp_path):
-    """The default suite runs one study of one experiment; `make test-slow` runs every experiment (below)."""
-    report = run_smoke("observed-units", tmp_path, only=("100-of-1000",))
-    text = report.read_text()
-    assert "100-of-1000" in text and "Test phase on CartPoleNoVel-v1" in text and "P(improvement)" in text
+@pytest.mark.parametrize("name", list(registry.EXPERIMENTS))
+def test_every_experiment_runs_end_to_end_and_resumes(name, tmp_path):
+    """Every experiment name runs at smoke scale (the default suite runs each one's first study; `make test-slow`
+    runs all their studies, below)."""
+    first = registry.get(name).studies[0]
+    text = run_smoke(name, tmp_path, only=(first.name,)).read_text()
+    assert first.name in text and "P(improvement)" in text
+    assert all(f"Test phase on {env_id}" in text for env_id in first.tested_on)
 
 
 @pytest.mark.slow
