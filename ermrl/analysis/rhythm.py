@@ -1,0 +1,103 @@
+"""How rhythmic a signal is (paper, appendix "Results analysis": the reservoir as a central pattern generator).
+
+The appendix compares the spectrum of the summed observation with that of the summed context (the reservoir
+states): the context's power gathers in a narrow band, the observation's does not. :func:`summed` reduces a
+(T, D) trace to (T,), :func:`spectrum` gives its power spectrum and :func:`rhythm_score` the fraction of power
+in the band around the dominant peak.
+
+The rhythm score, precisely: take the power spectrum P of the mean-removed, Hann-windowed signal (rfft bins
+0..T//2), drop the DC bin 0, find the peak bin p = argmax P[1:], and return
+
+    sum(P[b] for b in 1..T//2 with |b − p| <= half_width) / sum(P[1:])
+
+a value in [0, 1]. The Hann window keeps a sine's power inside its main lobe (±2 bins) wherever its frequency
+falls between bins: a pure sine scores ~1 with the default half_width 2. White noise spreads its power evenly,
+so it scores about (2·half_width + 1) / (T/2), a little more since the peak is the largest of its bins. A constant
+signal (no power off DC) scores 0.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ermrl.errors import ConfigError
+
+HALF_WIDTH = 2
+"""Default half width, in bins, of the band around the peak that :func:`rhythm_score` counts."""
+
+
+def _as_signal(signal, name: str = "signal") -> np.ndarray:
+    signal = np.asarray(signal, np.float64)
+    if signal.ndim != 1 or signal.shape[0] < 4:
+        raise ConfigError(f"{name} must be 1-D with at least 4 samples, got shape {signal.shape}; "
+                          "reduce a (T, D) trace with summed() first")
+    if not np.all(np.isfinite(signal)):
+        raise ConfigError(f"{name} has NaN or inf values; drop them before computing a spectrum")
+    return signal
+
+
+def spectrum(signal: np.ndarray, dt: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Power spectrum of a (T,) signal sampled every ``dt``: numpy.fft.rfft of the mean-removed signal times a
+    Hann window. Returns (freqs (F,), power (F,)) with F = T//2 + 1; freqs in cycles per unit of ``dt``,
+    power |rfft|² (bin 0 is DC, ~0 after the mean removal)."""
+    signal = _as_signal(signal)
+    if not dt > 0:
+        raise ConfigError(f"dt must be > 0 (the sampling interval), got {dt}")
+    x = (signal - signal.mean()) * np.hanning(len(signal))
+    return np.fft.rfftfreq(len(signal), dt), np.abs(np.fft.rfft(x)) ** 2
+
+
+def rhythm_score(signal: np.ndarray, half_width: int = HALF_WIDTH) -> float:
+    """Fraction, in [0, 1], of a (T,) signal's non-DC power within ``half_width`` bins of its dominant peak
+    (see the module docstring). 1: a single rhythm; ~(2·half_width + 1)/(T/2): white noise."""
+    if half_width < 0:
+        raise ConfigError(f"half_width must be >= 0 bins, got {half_width}")
+    _, power = spectrum(signal)
+    power = power[1:]
+    total = power.sum()
+    if total <= 0.0:
+        return 0.0
+    peak = int(np.argmax(power))
+    band = power[max(0, peak - half_width): peak + half_width + 1]
+    return float(min(1.0, band.sum() / total))
+
+
+def summed(traces: np.ndarray) -> np.ndarray:
+    """Sum over dimensions of a (T, D) trace (observations or reservoir states) -> (T,)."""
+    traces = np.asarray(traces)
+    if traces.ndim != 2:
+        raise ConfigError(f"traces must be (T, D), got shape {traces.shape}")
+    return traces.sum(axis=1)
+
+
+def plot_spectra(named_signals: dict[str, np.ndarray], path: Path | str, dt: float = 1.0,
+                 half_width: int = HALF_WIDTH) -> Path:
+    """Plots each (T,) signal's power spectrum (normalized to unit non-DC power, DC left out, log scale), its
+    rhythm score in the legend. Writes ``path`` as a PNG and returns it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ermrl.storage import atomic_path
+
+    if not named_signals:
+        raise ConfigError("plot_spectra needs at least one signal, e.g. {'summed context': summed(states)}")
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for name, signal in named_signals.items():
+        freqs, power = spectrum(signal, dt)
+        total = power[1:].sum()
+        ax.semilogy(freqs[1:], power[1:] / total if total > 0 else power[1:],
+                    label=f"{name} (rhythm {rhythm_score(signal, half_width):.2f})")
+    ax.set_xlabel("frequency (cycles per step)" if dt == 1.0 else f"frequency (cycles per unit, dt={dt:g})")
+    ax.set_ylabel("power (fraction of non-DC)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    path = Path(path).with_suffix(".png")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    return path
