@@ -146,6 +146,13 @@ def test_test_and_report_need_an_existing_study(tmp_path):
         assert r.returncode == 2
         assert r.stderr.startswith(f"ermrl {command}: error: no study 'missing': "), r.stderr
         assert not (tmp_path / "study.db").exists()  # looking does not create a database
+    journal = tmp_path / "missing.log"
+    for command in ("select", "test", "report"):
+        r = cli(command, "--study", "missing", "--storage", str(journal))
+        assert r.returncode == 2
+        assert r.stderr == (f"ermrl {command}: error: no study 'missing': {journal} does not exist; "
+                            "run `ermrl evolve` first or pass --storage/--out\n"), r.stderr
+        assert not journal.exists()  # nor an empty journal file
 
 
 def test_journal_storage_persists_a_study(tmp_path):

@@ -22,12 +22,21 @@ def default_storage(run_dir: Path) -> str:
     return f"sqlite:///{run_dir / 'study.db'}"
 
 
+def storage_file(url: str) -> Path | None:
+    """The file behind a SQLite URL or a journal file; None for a database server."""
+    if url.startswith("journal:") or url.endswith((".log", ".jsonl")):
+        return Path(url.removeprefix("journal:"))
+    if url.startswith("sqlite:///"):
+        return Path(url.removeprefix("sqlite:///"))
+    return None
+
+
 def make_storage(url: str) -> optuna.storages.BaseStorage:
     """An Optuna storage for ``url``; raises ConfigError (one line) if it cannot be opened."""
     journal = url.startswith("journal:") or url.endswith((".log", ".jsonl"))
     try:
         if journal:
-            path = Path(url.removeprefix("journal:"))
+            path = storage_file(url)
             path.parent.mkdir(parents=True, exist_ok=True)
             return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(path)))
         if url.startswith("sqlite:///"):
@@ -76,9 +85,9 @@ def open_study(storage_url: str, name: str, sampler, record: dict | None) -> opt
 
 def load_study(storage_url: str, name: str) -> optuna.Study:
     """An existing ermrl study; ConfigError if it does not exist or was not made by ``ermrl evolve``."""
-    if storage_url.startswith("sqlite:///") and not Path(storage_url.removeprefix("sqlite:///")).exists():
-        raise ConfigError(f"no study {name!r}: {storage_url.removeprefix('sqlite:///')} does not exist; "
-                          "run `ermrl evolve` first or pass --storage/--out")
+    path = storage_file(storage_url)
+    if path is not None and not path.exists():  # never create an empty database or journal just to look
+        raise ConfigError(f"no study {name!r}: {path} does not exist; run `ermrl evolve` first or pass --storage/--out")
     storage = make_storage(storage_url)
     try:
         study = optuna.load_study(study_name=name, storage=storage)
