@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 PIP := $(BIN)/python -m pip --disable-pip-version-check -q
 
-.PHONY: demo test test-slow test-reference parity reference bench clean
+.PHONY: demo test system-deps test-slow test-reference parity reference bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -15,10 +15,22 @@ $(VENV)/.installed-base: pyproject.toml | $(BIN)/python
 	$(PIP) install -e .
 	touch $@
 
-# The tests run every listed env id, so they take the box2d and mujoco extras too.
+# The tests run every listed env id, so they take the box2d and mujoco extras too, and video for `ermrl video`.
 $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
-	$(PIP) install -e '.[test,box2d,mujoco]'
+	$(PIP) install -e '.[test,box2d,mujoco,video]'
 	touch $@
+
+# MuJoCo renders videos headless through OSMesa (Debian's libosmesa6; about 130 MB installed with LLVM). As root
+# (CI) it is installed when missing; anyone else gets a note, and the MuJoCo video test is skipped without it or EGL.
+GL_PACKAGES := libosmesa6
+system-deps:
+	@if $(PYTHON) -c "import ctypes.util, sys; sys.exit(ctypes.util.find_library('OSMesa') is None)"; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		echo "installing $(GL_PACKAGES) (headless MuJoCo rendering)"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(GL_PACKAGES) >/dev/null; \
+	else \
+		echo "note: MuJoCo videos render headless with OSMesa: run 'sudo apt-get install $(GL_PACKAGES)' (Debian/Ubuntu); without it (or EGL) the MuJoCo video test is skipped"; \
+	fi
 
 # The reference pipeline (SB3 + ReservoirPy) lives in its own venv so that the default one never holds torch.
 # torch first, pinned, so that pip takes the CPU wheel instead of a multi-GB CUDA build.
@@ -36,7 +48,7 @@ demo: $(VENV)/.installed-base
 	$(BIN)/ermrl test --study demo --seeds 3 --timesteps 100000
 	$(BIN)/ermrl report --study demo
 
-test: $(VENV)/.installed-test
+test: $(VENV)/.installed-test system-deps
 	$(BIN)/python -m pytest -q
 
 # Slow tests: the MuJoCo v4 smoke tests (and any long learning run marked slow).

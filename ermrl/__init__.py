@@ -12,3 +12,12 @@ except RuntimeError:  # backends already initialized by the caller: keep their s
     pass
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    """``ermrl.load_agent``, imported on first use so that ``import ermrl`` stays cheap."""
+    if name == "load_agent":
+        from ermrl.saved_agent import load_agent
+
+        return load_agent
+    raise AttributeError(f"module 'ermrl' has no attribute {name!r}")

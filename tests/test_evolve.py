@@ -1,11 +1,13 @@
 """Evolution, resumption, divergence, the test phase and the report, at tiny budgets."""
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import optuna
@@ -15,7 +17,7 @@ from optuna.trial import TrialState
 from ermrl.agent import AgentConfig, Phi
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.evolve import evolve
-from ermrl.storage import encode_study_record
+from ermrl.storage import decode_study_record, encode_study_record
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
 from ermrl.training import Population, TrainConfig, train
@@ -167,6 +169,25 @@ def test_journal_storage_persists_a_study(tmp_path):
     assert again.user_attrs["ermrl"]["env_id"] == "CartPoleNoVel-v1"
     with pytest.raises(Exception, match="already exists with another config"):
         open_study(url, "j", make_sampler("random", 6, 0), encode_study_record(tiny(trials=1, space=SearchSpace())))
+
+
+def test_a_study_from_before_a_config_field_existed_still_resumes(tmp_path):
+    """A record written before a field was added (here: without ppo.log_std_init and the reservoir bias) resumes with the
+    same config, since missing fields take their defaults; a real change is still refused. The committed journals
+    under docs/data/ open without error."""
+    url = f"journal:{tmp_path / 'old.log'}"
+    config = tiny(trials=1)
+    record = encode_study_record(config)
+    del record["train"]["ppo"]["log_std_init"], record["train"]["agent"]["spec"]["bias"]
+    open_study(url, "old", make_sampler("random", 6, 0), record)
+    open_study(url, "old", make_sampler("random", 6, 0), encode_study_record(config))  # resumes
+    with pytest.raises(Exception, match="already exists with another config"):
+        open_study(url, "old", make_sampler("random", 6, 0), encode_study_record(tiny(trials=1, space=SearchSpace())))
+    journal = tmp_path / "committed.log"
+    shutil.copy(Path(__file__).parent.parent / "docs" / "data" / "generalization-small" / "studies.log", journal)
+    study = load_study(f"journal:{journal}", "generalization-morphology-small-to-ant")
+    stored = decode_study_record(study.user_attrs["ermrl"])
+    open_study(f"journal:{journal}", study.study_name, make_sampler("cmaes", 9, 0), encode_study_record(stored))
 
 
 def test_search_space_for_several_reservoirs():

@@ -56,3 +56,46 @@ def test_plot_and_errors(tmp_path):
         spectrum(np.ones(T), dt=0)
     with pytest.raises(ConfigError, match="at least one signal"):
         plot_spectra({}, tmp_path / "empty.png")
+
+
+def test_cli_context_and_fft_on_saved_agents(tmp_path):
+    """`ermrl analyze context` and `ermrl analyze fft` on real saved agents (ER-MRL and PPO, 2 seeds each): the
+    fft table has one row per run with both agents; for PPO the policy input is the observation, so its two
+    rhythm scores are equal; the per-agent JSON and the figures are written."""
+    import json
+    import subprocess
+    import sys
+
+    def ermrl(*args):
+        return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, timeout=600)
+
+    runs = {"ermrl": [], "ppo": ["--no-reservoir"]}
+    for name, extra in runs.items():
+        r = ermrl("train", "--env", "PendulumNoVel-v1", "--timesteps", "2048", "--seeds", "2", "--quiet",
+                  "--out", str(tmp_path / name), *extra)
+        assert r.returncode == 0, r.stderr
+    r = ermrl("analyze", "context", str(tmp_path / "ermrl"))
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "ermrl" / "context.png").read_bytes().startswith(b"\x89PNG")
+    fig = tmp_path / "fft.png"
+    r = ermrl("analyze", "fft", str(tmp_path / "ermrl"), str(tmp_path / "ppo"), "--out", str(fig))
+    assert r.returncode == 0, r.stderr
+    lines = fig.with_suffix(".md").read_text().splitlines()
+    assert [line.split(" | ")[1] for line in lines[2:]] == ["2", "2"]
+    ppo = lines[3].rstrip(" |").split(" | ")
+    assert ppo[0].endswith("ppo") and ppo[3] == ppo[4]
+    rows = json.loads(fig.with_suffix(".json").read_text())
+    assert len(rows) == 4 and all(0 <= row["rhythm_input"] <= 1 and row["steps"] == 200 for row in rows)
+    assert fig.read_bytes().startswith(b"\x89PNG")
+    for args, message in [
+        (["fft", str(tmp_path / "nothing"), "--out", str(fig)],
+         f"{tmp_path / 'nothing'} does not exist; give a run folder or a saved agent file (.npz)"),
+        (["context", str(tmp_path / "ppo")], f"{tmp_path / 'ppo' / 'agents' / 'seed0.npz'} is a plain PPO agent: it "
+                                              "has no reservoir to plot; give an ER-MRL agent"),
+    ]:
+        r = ermrl("analyze", *args)
+        assert r.returncode == 2 and r.stderr == f"ermrl analyze: error: {message}\n", r.stderr
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    r = ermrl("analyze", "fft", str(empty), "--out", str(fig))
+    assert r.stderr == f"ermrl analyze: error: {empty} holds no saved agent; train with --save-agents (the default) first\n"

@@ -15,10 +15,11 @@ from ermrl.storage import atomic_path  # noqa: E402
 
 
 def learning_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str, path: Path | str,
-                    formats: tuple[str, ...] = ("png",)) -> list[Path]:
+                    formats: tuple[str, ...] = ("png",), xlabel: str = "timesteps") -> list[Path]:
     """Plots {label: (timesteps (I,), values (S, I))} as mean ± std bands over the S seeds.
 
-    Writes ``path`` with each suffix in ``formats`` and returns the files written.
+    Writes ``path`` with each suffix in ``formats`` and returns the files written. The x values may be anything
+    on the update grid (e.g. wall seconds), named by ``xlabel``.
     """
     fig, ax = plt.subplots(figsize=(7, 4))
     for label, (steps, values) in curves.items():
@@ -28,7 +29,7 @@ def learning_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str
         n = values.shape[0]
         ax.plot(steps, mean, label=f"{label} (n={n})")
         ax.fill_between(steps, mean - std, mean + std, alpha=0.2)
-    ax.set_xlabel("timesteps")
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("mean episode return (last 100 episodes)")
     ax.set_title(title)
     ax.grid(alpha=0.3)

@@ -133,16 +133,31 @@ def _runner(config: AgentConfig, info: EnvInfo):
     return jax.jit(run)
 
 
+def as_k(phi: Phi) -> Phi:
+    """Φ with (K,) float32 fields (scalar fields give K = 1)."""
+    fields = [np.atleast_1d(np.asarray(v, np.float32)) for v in phi]
+    if len({f.shape for f in fields}) != 1 or fields[0].ndim != 1:
+        raise ConfigError(f"Φ fields must be scalars or equal-length lists (one value per reservoir), got {phi}")
+    return Phi(*fields)
+
+
+def phi_text(phi: Phi) -> str:
+    """'sr=0.95 lr=0.5 iss=1' (K = 1) or 'sr=0.95/0.95 lr=0.5/0.05 iss=1/1'."""
+    return " ".join(f"{n}={'/'.join(f'{float(v):.3g}' for v in f)}" for n, f in zip(Phi._fields, as_k(phi)))
+
+
 def reservoir_states(env_id: str, rollouts: Rollouts, phi: Phi, *, units: int = 100, seed: int = 0,
                      feed_action: str = "previous") -> np.ndarray:
-    """Contexts c_t (T, units) of one reservoir with Φ = ``phi`` and ``seed``, fed each episode of ``rollouts``
-    as the agent on ``env_id`` is: reset and fed (o_0, zeros, 0), then (masked o_t, a_{t−1}, r_{t−1})."""
+    """Contexts c_t (T, K·units) of K reservoirs with Φ = ``phi`` (scalar fields: K = 1; (K,) fields: K
+    reservoirs) and ``seed``, fed each episode of ``rollouts`` as the agent on ``env_id`` is: reset and fed
+    (o_0, zeros, 0), then (masked o_t, a_{t−1}, r_{t−1})."""
     base_id, deleted = masking.parse(env_id)
     if base_id != rollouts.base_id:
         raise ConfigError(f"rollouts come from {rollouts.base_id!r}, not {base_id!r}; collect them from {base_id!r}")
     info = describe(env_id, base_id, deleted)
-    config = AgentConfig(reservoirs=1, spec=ReservoirSpec(units=units), feed_action=feed_action)
-    res = Agent.build(Agent(config, info).unit_weights(seed), Phi(*(np.full(1, v, np.float32) for v in phi)))
+    phi = as_k(phi)
+    config = AgentConfig(reservoirs=len(phi.sr), spec=ReservoirSpec(units=units), feed_action=feed_action)
+    res = Agent.build(Agent(config, info).unit_weights(seed), phi)
     start = rollouts.t == 0
     prev_action = np.roll(rollouts.actions, 1, axis=0)
     prev_action[start] = 0
@@ -229,8 +244,8 @@ def probe(env_id: str, phi: Phi = MEMORY, *, units: int = 100, seed: int = 0, ep
         targets[rows] = rollouts.obs[rows + k][:, kept]
         future.append(float(np.mean(_r2(features, targets, train & ok, test & ok, alpha))))
 
-    phi = Phi(*(float(v) for v in phi))
-    return ProbeResult(label or f"sr={phi.sr:g} lr={phi.lr:g} iss={phi.iss:g}", phi, env_id, tuple(deleted),
+    phi = Phi(*(tuple(map(float, f)) if len(f) > 1 else float(f[0]) for f in as_k(phi)))
+    return ProbeResult(label or phi_text(phi), phi, env_id, tuple(deleted),
                        float(np.mean(velocity)), tuple(map(float, velocity)), tuple(future),
                        int(train.sum()), int(test.sum()))
 
@@ -247,7 +262,7 @@ def probe_table(results: list[ProbeResult]) -> str:
     for r in results:
         future = [f"{v:.3f}" for v in r.r2_future] + [""] * (horizon - len(r.r2_future))
         per_dim = [f"{v:.3f}" for v in r.r2_velocity_per_dim] if r.velocity_dims == dims else [""] * len(dims)
-        cells = [r.label, f"{r.phi.sr:g}", f"{r.phi.lr:g}", f"{r.phi.iss:g}", *per_dim, f"{r.r2_velocity:.3f}",
+        cells = [r.label, *("/".join(f"{float(v):.3g}" for v in f) for f in as_k(r.phi)), *per_dim, f"{r.r2_velocity:.3f}",
                  *future]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -101,3 +101,50 @@ def plot_spectra(named_signals: dict[str, np.ndarray], path: Path | str, dt: flo
         fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
     return path
+
+
+def agent_rhythm(agent_file: Path | str, seed: int = 0, max_steps: int | None = None) -> dict:
+    """One deterministic episode of a saved agent (reset with ``seed``): the rhythm score of its summed
+    observation and of its summed policy input (the context c_t; for plain PPO, the observation itself), and both
+    summed signals (T,) for plotting."""
+    from ermrl.analysis.context import record_episode
+    from ermrl.saved_agent import load_agent
+
+    agent = load_agent(agent_file)
+    env = agent.make_env()
+    try:
+        obs, context, rewards = record_episode(agent, env, seed, max_steps)
+    finally:
+        env.close()
+    if len(obs) < 8:
+        raise ConfigError(f"{agent_file}: the episode lasted {len(obs)} steps, too few for a spectrum; "
+                          "use an agent that survives longer or a larger --max-steps")
+    o, c = summed(obs), summed(context)
+    return {"agent": str(agent_file), "env_id": agent.env_id, "reservoirs": agent.config.reservoirs,
+            "steps": len(obs), "return": float(rewards.sum()), "rhythm_observation": rhythm_score(o),
+            "rhythm_input": rhythm_score(c), "summed_observation": o, "summed_input": c}
+
+
+def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0,
+                 max_steps: int | None = None) -> tuple[str, list[dict]]:
+    """Rhythm of every saved agent of each named source (label -> agent files, e.g. a test phase's ER-MRL and
+    PPO agents). Returns a Markdown table (one row per source: the mean ± std over its agents of the rhythm of the
+    summed observation and of the summed policy input) and the per-agent rows; plots the spectra of the first
+    agent of each source at ``path``."""
+    rows, lines = [], ["| run | agents | episode steps | rhythm, summed observation | rhythm, summed policy input |",
+                       "|---|---:|---:|---|---|"]
+    signals = {}
+    for label, files in sources.items():
+        if not files:
+            raise ConfigError(f"{label} holds no saved agent; train with --save-agents (the default) first")
+        found = [{**agent_rhythm(f, seed, max_steps), "run": label} for f in files]
+        rows += found
+        obs, inp = (np.array([r[k] for r in found]) for k in ("rhythm_observation", "rhythm_input"))
+        steps = np.mean([r["steps"] for r in found])
+        lines.append(f"| {label} | {len(found)} | {steps:.0f} | {obs.mean():.3f} ± {obs.std():.3f} | "
+                     f"{inp.mean():.3f} ± {inp.std():.3f} |")
+        signals[f"{label}: summed observation"] = found[0]["summed_observation"]
+        if found[0]["reservoirs"]:
+            signals[f"{label}: summed context"] = found[0]["summed_input"]
+    plot_spectra(signals, path)
+    return "\n".join(lines) + "\n", [{k: v for k, v in r.items() if not k.startswith("summed")} for r in rows]

@@ -11,7 +11,7 @@ from ermrl.errors import ConfigError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from ermrl.cli import commands, experiment
+    from ermrl.cli import analyze, commands, experiment, video
 
     parser = argparse.ArgumentParser(
         prog="ermrl", description="Evolving Reservoirs for Meta Reinforcement Learning (ER-MRL), vectorized in JAX.",
@@ -20,6 +20,8 @@ def build_parser() -> argparse.ArgumentParser:
     formatter = argparse.ArgumentDefaultsHelpFormatter
     commands.add_parsers(sub, formatter)
     experiment.add_parser(sub, formatter)
+    analyze.add_parser(sub, formatter)
+    video.add_parser(sub, formatter)
     return parser
 
 
@@ -50,14 +52,15 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ermrl.cli import commands, experiment
+    from ermrl.cli import analyze, commands, experiment, video
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = f"ermrl {argv[0]}" if argv and not argv[0].startswith("-") else "ermrl"
     try:
         args = parse(argv)
         command = f"ermrl {args.command}"
-        handlers = {**commands.COMMANDS, "experiment": experiment.run_command}
+        handlers = {**commands.COMMANDS, "experiment": experiment.run_command, "analyze": analyze.run_command,
+                    "video": video.run_command}
         return handlers[args.command](args)
     except ConfigError as e:
         print(f"{command}: error: {e}", file=sys.stderr)

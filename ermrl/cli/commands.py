@@ -13,7 +13,7 @@ from ermrl.errors import ConfigError
 
 
 def add_parsers(sub, formatter) -> None:
-    p = sub.add_parser("train", help="train ER-MRL agents (or plain PPO) at a fixed Φ over several seeds",
+    p = sub.add_parser("train", help="train ER-MRL agents (or plain PPO, or PPO-LSTM) at a fixed Φ over several seeds",
                        description="Train one Φ on several seeds as one vectorized population, then write the "
                                    "effective config (JSON), episodes and curves (CSV), a summary and a learning-curve "
                                    "PNG into the run folder.", formatter_class=formatter)
@@ -24,7 +24,7 @@ def add_parsers(sub, formatter) -> None:
                        + ", one value or one per reservoir")
     p.add_argument("--seeds", type=int, default=3, help="number of seeds (0..N-1)")
     p.add_argument("--no-reservoir", action="store_true", help="plain PPO: the policy sees the observation")
-    options.add_options(p, "env", "agent", "ppo")
+    options.add_options(p, "env", "agent", "ppo", "model", "tensorboard", "agents")
     p.add_argument("--out", type=Path, default=None, help="run folder (default runs/train-ENV-TIME)")
     _common(p)
 
@@ -57,11 +57,12 @@ def add_parsers(sub, formatter) -> None:
 
     p = sub.add_parser("test", help="test phase: train Φ* on new seeds against PPO baselines",
                        description="Train Φ* (the selected trial, else the best) on new seeds, plus vanilla PPO on "
-                                   "the same observation and PPO with full observations; write curves (CSV), a "
+                                   "the same observation and PPO with full observations (and PPO-LSTM with "
+                                   "--recurrent-baseline); write curves (CSV), a "
                                    "summary with IQM and bootstrap CIs, and the paper-style figure. --env tests on an "
                                    "env outside the evolution (generalization).", formatter_class=formatter)
     _study_location(p)
-    options.add_options(p, "test")
+    options.add_options(p, "test", "tensorboard", "agents")
     _common(p)
 
     p = sub.add_parser("report", help="write a self-contained HTML report of a study",
@@ -167,24 +168,33 @@ def cmd_train(args) -> int:
 
     from ermrl import envs, storage
     from ermrl.agent import Phi
+    from ermrl.analysis import tensorboard
     from ermrl.analysis.plots import learning_curves
     from ermrl.cli.progress import TrainingBar
     from ermrl.training import Population, Trainer
 
-    k = 0 if args.no_reservoir else args.reservoirs
+    k = 0 if args.no_reservoir or args.model == "lstm" else args.reservoirs
     envs.describe(args.env, args.backend)  # fail fast on an unknown id or a missing extra
+    if args.tensorboard is not None:
+        tensorboard.check_logdir(args.tensorboard)
     if args.seeds < 1:
         raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
     config = options.train_config(args, args.env, k)
     phi = Phi(*(np.array(_phi_values(n, getattr(args, n), max(k, 1))[: max(k, 1)], np.float32) for n in ("sr", "lr", "iss")))
     _check_phi(phi)
     population = Population.grid(phi, args.seeds, config.ppo.learning_rate, k)
-    label = "PPO" if k == 0 else f"ER-MRL ({k} reservoir{'s' if k > 1 else ''})"
+    label = "PPO-LSTM" if args.model == "lstm" else \
+        "PPO" if k == 0 else f"ER-MRL ({k} reservoir{'s' if k > 1 else ''})"
     out = args.out or Path("runs") / f"train-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
 
     with TrainingBar(f"{args.env} × {args.seeds} seeds", enabled=not args.quiet) as bar:
-        results = Trainer(config).run(population, bar.update)
+        timing = tensorboard.Timing(bar.update)
+        results = Trainer(config).run(population, timing)
     run = storage.write_train_run(out, config, results, label, options.effective(args))
+    if args.save_agents:
+        storage.write_agents(run.folder / storage.AGENTS_DIR, config, results, label)
+    if args.tensorboard is not None:
+        tensorboard.write_results(args.tensorboard, results, label, timing.elapsed_s)
     learning_curves({label: results.curves()}, f"{results.env_id}: {label}", run.figure)
     fit = results.fitness()
     for seed, f in zip(results.seeds, fit):
@@ -193,7 +203,10 @@ def cmd_train(args) -> int:
           f"compile {results.compile_s:.1f}s, train {results.train_s:.1f}s")
     if not results.finite.all():
         print(f"warning: {int((~results.finite).sum())} agent(s) diverged (NaN/inf); their fitness is NaN", file=sys.stderr)
-    print(f"wrote {out}/ (config.json, episodes.csv, curves.csv, summary.json, learning_curve.png)")
+    print(f"wrote {out}/ (config.json, episodes.csv, curves.csv, summary.json, learning_curve.png"
+          + (", agents/" if args.save_agents else "") + ")")
+    if args.tensorboard is not None:
+        print(f"TensorBoard: tensorboard --logdir {args.tensorboard}")
     return 0
 
 
@@ -292,19 +305,26 @@ def cmd_select(args) -> int:
 
 def cmd_test(args) -> int:
     from ermrl import storage
+    from ermrl.analysis import tensorboard
     from ermrl.analysis.statistics import format_ci
     from ermrl.evolution.study import ATTR, load_study
-    from ermrl.experiments.evaluation import run_test_phase, test_dir
+    from ermrl.experiments.evaluation import FIRST_TEST_SEED, run_test_phase, test_dir
 
+    if args.tensorboard is not None:
+        tensorboard.check_logdir(args.tensorboard)
     test = options.test_config(args)
     study = load_study(_storage(args), args.study)
     storage.decode_study_record(study.user_attrs[ATTR])
     out = test_dir(_run_dir(args), study.user_attrs[ATTR], test.env_id)
     progress, close = _bars(args.quiet)
+    timings = tensorboard.Timings(progress)  # the bars, and each population's update times for time/fps
     try:
-        rows = run_test_phase(study, out, test, progress)
+        rows = run_test_phase(study, out, test, timings, save_agents=args.save_agents)
     finally:
         close()
+    if args.tensorboard is not None:  # from curves.csv: run_test_phase keeps its Results to itself
+        tensorboard.write_curves(args.tensorboard, storage.read_curves_csv(out / "curves.csv"),
+                                 range(FIRST_TEST_SEED, FIRST_TEST_SEED + test.seeds), timings.elapsed_s)
     print(f"Φ*: {rows[0]['phi_choice']}; evolved on {', '.join(rows[0]['evolved_on'])}; tested on {rows[0]['env_id']}")
     for r in rows:
         div = f"  ({r['diverged']} diverged)" if r["diverged"] else ""
@@ -312,7 +332,10 @@ def cmd_test(args) -> int:
               f"{format_ci(r['final_iqm'], r['final_iqm_low'], r['final_iqm_high'])}  AUC {_pm(r['auc_mean'], r['auc_std'])}{div}")
         for baseline, (p, lo, hi) in r.get("improvement", {}).items():
             print(f"    P(better than {baseline}) = {p:.2f} [{lo:.2f}, {hi:.2f}]")
-    print(f"wrote {out}/ (curves.csv, summary.json, summary.csv, test_phase.png, test_phase.svg)")
+    print(f"wrote {out}/ (curves.csv, summary.json, summary.csv, test_phase.png, test_phase.svg"
+          + (", agents/" if args.save_agents else "") + ")")
+    if args.tensorboard is not None:
+        print(f"TensorBoard: tensorboard --logdir {args.tensorboard}")
     return 0
 
 

@@ -102,6 +102,10 @@ def _groups() -> dict[str, list[Option]]:
             Option("--skip-connection", AgentConfig, "skip_connection", kwargs={"action": "store_true"}),
             Option("--observed-units", AgentConfig, "observed_units", kwargs={"type": int}),
         ],
+        "model": [Option("--model", PPOConfig, "model", kwargs={"choices": ["ff", "lstm"]},
+                         help="'lstm' trains the recurrent baseline (PPO-LSTM; implies --no-reservoir)."),
+                  Option("--lstm-hidden", PPOConfig, "lstm_hidden_size", kwargs={"type": int}),
+                  Option("--lstm-seq-len", PPOConfig, "lstm_seq_len", kwargs={"type": int})],
         "ppo": [Option("--preset", help="PPO settings: 'sb3' = stable-baselines3's defaults (the paper); "
                                         "'fast' = 8 envs, 4 epochs.", default="sb3", kwargs={"choices": ["sb3", "fast"]}),
                 Option("--ppo-lr", PPOConfig, "learning_rate", help="Default: the preset's (3e-4).",
@@ -120,7 +124,17 @@ def _groups() -> dict[str, list[Option]]:
                  Option("--ppo-lr", TestConfig, "ppo_lr", kwargs={"type": float}),
                  Option("--env", TestConfig, "env_id", kwargs={}),
                  Option("--trial", TestConfig, "trial", kwargs={"type": int}),
-                 Option("--auc-steps", TestConfig, "auc_steps", kwargs={"type": int})],
+                 Option("--auc-steps", TestConfig, "auc_steps", kwargs={"type": int}),
+                 Option("--recurrent-baseline", TestConfig, "recurrent_baseline", kwargs={"action": "store_true"})],
+        "agents": [Option("--save-agents", help="save every agent's final policy in the run folder's agents/ "
+                                                "(one .npz each, about 100 kB at the default sizes; "
+                                                "ermrl.load_agent loads one).",
+                          default=True, kwargs={"action": argparse.BooleanOptionalAction})],
+        "tensorboard": [Option("--tensorboard", help="also write TensorBoard logs here after training: one run "
+                                                     "folder per agent (LABEL_seedN) with SB3's tag names "
+                                                     "(rollout/ep_rew_mean; rollout/ep_len_mean, time/fps, train/* "
+                                                     "where known), the env step count as the global step.",
+                               kwargs={"type": Path, "metavar": "DIR"})],
     }
 
 
@@ -160,6 +174,8 @@ def ppo_config(args):
     from ermrl.ppo.config import PRESETS
 
     ppo = PRESETS[args.preset]
+    if getattr(args, "model", "ff") == "lstm":  # the "model" options exist on `ermrl train` only
+        ppo = dataclasses.replace(ppo, model="lstm", lstm_hidden_size=args.lstm_hidden, lstm_seq_len=args.lstm_seq_len)
     return ppo if args.ppo_lr is None else dataclasses.replace(ppo, learning_rate=args.ppo_lr)
 
 
@@ -183,7 +199,8 @@ def test_config(args):
     from ermrl.experiments.evaluation import TestConfig
 
     return TestConfig(seeds=args.seeds, timesteps=args.timesteps, ermrl_lrs=tuple(args.ermrl_lr or ()),
-                      ppo_lr=args.ppo_lr, env_id=args.env, trial=args.trial, auc_steps=args.auc_steps)
+                      ppo_lr=args.ppo_lr, env_id=args.env, trial=args.trial, auc_steps=args.auc_steps,
+                      recurrent_baseline=args.recurrent_baseline)
 
 
 def effective(args) -> dict:
@@ -236,7 +253,7 @@ def apply_config_file(parser: argparse.ArgumentParser, path: Path) -> None:
 
 def _convert(action: argparse.Action, value, path: Path, key: str):
     where = f"config file {path}: {key}"
-    if isinstance(action, argparse._StoreTrueAction):
+    if isinstance(action, (argparse._StoreTrueAction, argparse.BooleanOptionalAction)):
         if not isinstance(value, bool):
             raise ConfigError(f"{where} must be true or false, got {value!r}")
         return value

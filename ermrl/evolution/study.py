@@ -77,7 +77,7 @@ def open_study(storage_url: str, name: str, sampler, record: dict | None) -> opt
         stored = study.user_attrs.get(ATTR)
         if stored is None:
             study.set_user_attr(ATTR, record)
-        elif _comparable(stored) != _comparable(record):
+        elif _comparable(_current(stored)) != _comparable(record):
             raise ConfigError(f"study {name!r} already exists with another config; rerun with the same flags to "
                               "resume it, or pick a new --study name")
     return study
@@ -97,6 +97,14 @@ def load_study(storage_url: str, name: str) -> optuna.Study:
     if ATTR not in study.user_attrs:
         raise ConfigError(f"study {name!r} was not made by `ermrl evolve` (no '{ATTR}' attribute)")
     return study
+
+
+def _current(record: dict) -> dict:
+    """A stored record as this version writes it: decoded (fields added since it was written take their
+    defaults) and encoded again, so that a study started before a config field existed still resumes."""
+    from ermrl import storage
+
+    return storage.encode_study_record(storage.decode_study_record(record))
 
 
 def _comparable(record: dict) -> str:

@@ -3,7 +3,9 @@
 Models, all with the evolution's agent and PPO settings:
 - ER-MRL with Φ*, at one or several learning rates (trained as one population: the step size is traced);
 - vanilla PPO on the same (masked) observation, a feedforward policy;
-- PPO with full observations (the unmasked env), when the env is a NoVel variant.
+- PPO with full observations (the unmasked env), when the env is a NoVel variant;
+- with ``recurrent_baseline``, PPO-LSTM on the same observation (the recurrent baseline, sb3-contrib
+  RecurrentPPO's policy: :mod:`ermrl.ppo.recurrent`), at the PPO baselines' learning rate; JAX envs only.
 
 Φ* is the study's selected trial when ``ermrl select`` ran (see :mod:`ermrl.evolution.selection`), else its
 best trial, or any trial asked for. The test env may differ from the evolution's (paper §4.3, generalization):
@@ -26,7 +28,7 @@ from ermrl.envs import masking
 from ermrl.errors import ConfigError
 from ermrl.evolution.selection import chosen_trial
 from ermrl.evolution.study import ATTR
-from ermrl.training import Population, Results, Trainer
+from ermrl.training import Population, Results, Trainer, recurrent
 
 FIRST_TEST_SEED = 1000
 """Test seeds start here, away from the evolution's seeds 0, 1, 2, ... and selection's (new reservoirs,
@@ -53,6 +55,9 @@ class TestConfig:
     auc_steps: int | None = None
     """Also report the area under the curve over the first this many steps (e.g. 300k, where the paper's
     locomotion curves separate); None: the whole curve only."""
+    recurrent_baseline: bool = False
+    """Also train PPO-LSTM (the recurrent baseline: an LSTM policy trained end to end on the same observation)
+    at the PPO baselines' learning rate; JAX envs only."""
 
     def __post_init__(self):
         if self.seeds < 1:
@@ -105,10 +110,12 @@ def _phi_text(phi: Phi, k: int, trial: int) -> str:
 
 
 def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
-                   progress: Callable[[str], Callable] | None = None) -> list[dict]:
+                   progress: Callable[[str], Callable] | None = None, save_agents: bool = True) -> list[dict]:
     """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
-    into ``out``. Returns one summary row per model (see :func:`summarize`), each ER-MRL row with its
-    probability of improvement over every PPO baseline."""
+    into ``out``, and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
+    ermrl, ermrl-lr-LR with several learning rates, ppo, ppo-full-observation, ppo-lstm). Returns one summary row
+    per model (see :func:`summarize`), each ER-MRL row with its probability of improvement over every PPO baseline
+    (PPO-LSTM included)."""
     config = storage.decode_study_record(study.user_attrs[ATTR])
     trial, phi, how = chosen_trial(study, config, test.trial)
     env_id = test.env_id or config.env_ids[0]
@@ -120,15 +127,24 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     ppo_lr = config.train.ppo.learning_rate if test.ppo_lr is None else test.ppo_lr
     base_id, deleted = masking.parse(env_id)
     plain = dataclasses.replace(base, agent=dataclasses.replace(base.agent, reservoirs=0))
+    if test.recurrent_baseline:  # checked before any training: JAX envs only
+        lstm = dataclasses.replace(plain, ppo=dataclasses.replace(plain.ppo, model="lstm", learning_rate=ppo_lr))
+        recurrent.check(lstm)
 
     phi_text = _phi_text(phi, k, trial.number)
     labels = [f"ER-MRL ({phi_text})" if len(ermrl_lrs) == 1 else f"ER-MRL lr {lr:g} ({phi_text})" for lr in ermrl_lrs]
     jobs = [("ER-MRL", base, Population.grid(phi, seeds, list(ermrl_lrs), k), labels)]
+    folders = {label: "ermrl" if len(ermrl_lrs) == 1 else f"ermrl-lr-{lr:g}" for label, lr in zip(labels, ermrl_lrs)}
     no_phi = Phi(1.0, 1.0, 1.0)
     jobs.append(("PPO", plain, Population.grid(no_phi, seeds, ppo_lr, 0), ["PPO (same observation)"]))
+    folders["PPO (same observation)"] = "ppo"
     if deleted:
         jobs.append(("PPO", dataclasses.replace(plain, env_id=base_id), Population.grid(no_phi, seeds, ppo_lr, 0),
                      ["PPO (full observation)"]))
+        folders["PPO (full observation)"] = "ppo-full-observation"
+    if test.recurrent_baseline:
+        jobs.append(("PPO-LSTM", lstm, Population.grid(no_phi, seeds, ppo_lr, 0), ["PPO-LSTM (same observation)"]))
+        folders["PPO-LSTM (same observation)"] = "ppo-lstm"
 
     curves, seed_map, rows = {}, {}, []
     for kind, train_config, population, model_labels in jobs:
@@ -139,6 +155,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
             curves[label] = part.curves()
             seed_map[label] = part.seeds
             rows.append(summarize(label, kind, part, test.auc_steps))
+            if save_agents:
+                storage.write_agents(out / storage.AGENTS_DIR / folders[label], train_config, part, label)
     _add_improvement(rows)
     evolved_on = list(config.env_ids)
     for r in rows:
@@ -159,7 +177,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
 
 def _add_improvement(rows: list[dict]) -> None:
     """Adds to each ER-MRL row the probability that it beats each PPO baseline, with its 95% CI."""
-    baselines = [r for r in rows if r["kind"] == "PPO"]
+    baselines = [r for r in rows if r["kind"] in ("PPO", "PPO-LSTM")]
     for r in rows:
         if r["kind"] != "ER-MRL":
             continue

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 from ermrl.errors import ConfigError
 
@@ -36,6 +37,18 @@ class PPOConfig:
     """Hidden widths of the separate actor and critic tanh MLPs (SB3 MlpPolicy)."""
     log_std_init: float = 0.0
     """Initial state-independent log std of the Gaussian policy (Box actions)."""
+    model: Literal["ff", "lstm"] = "ff"
+    """Policy model: "ff", SB3's MlpPolicy on the context (what ER-MRL and plain PPO use); "lstm", the recurrent
+    baseline, sb3-contrib RecurrentPPO's MlpLstmPolicy (separate actor and critic LSTMs on the raw observation,
+    then the same MLPs), trained end to end (see :mod:`ermrl.ppo.recurrent`). JAX backend and no reservoir only."""
+    lstm_hidden_size: int = 64
+    """Units of each LSTM (model "lstm"). sb3-contrib's default is 256; 64 is what rl-zoo's tuned RecurrentPPO
+    settings for CartPoleNoVel-v1 and PendulumNoVel-v1 use (hyperparams/ppo_lstm.yml)."""
+    lstm_seq_len: int = 64
+    """Steps per training sequence (model "lstm"): the update cuts the rollout into windows of this many
+    consecutive steps of one env's data (the truncated-BPTT length), each starting from the LSTM state stored
+    during the rollout; batch_size must be a multiple of it. At batch_size = lstm_seq_len (64, the default with
+    SB3's batch_size) a minibatch is one window, the same steps sb3-contrib's minibatch holds."""
 
     def __post_init__(self):
         buffer = self.n_steps * self.n_envs
@@ -47,6 +60,14 @@ class PPOConfig:
             )
         if not (self.learning_rate > 0 and self.learning_rate < 1):
             raise ConfigError(f"learning rate {self.learning_rate} is outside (0, 1); the paper uses 3e-4 or 1e-4")
+        if self.model not in ("ff", "lstm"):
+            raise ConfigError(f"model must be 'ff' or 'lstm', got {self.model!r}")
+        if self.model == "lstm":
+            if min(self.lstm_hidden_size, self.lstm_seq_len) < 1:
+                raise ConfigError("lstm_hidden_size and lstm_seq_len must be >= 1")
+            if self.batch_size % self.lstm_seq_len:
+                raise ConfigError(f"batch_size {self.batch_size} must be a multiple of lstm_seq_len "
+                                  f"{self.lstm_seq_len} (a minibatch is whole sequences)")
 
     @property
     def buffer_size(self) -> int:

@@ -10,6 +10,8 @@ import dataclasses
 
 import numpy as np
 
+from ermrl.envs.spaces import EnvInfo
+
 FITNESS_EPISODES = 10
 """Episodes averaged for an agent's fitness (paper: "the final 10 episodes")."""
 CURVE_WINDOW = 100
@@ -26,6 +28,39 @@ class Episodes:
     """(E,) float: undiscounted return."""
     length: np.ndarray
     """(E,) int."""
+
+
+@dataclasses.dataclass
+class Policies:
+    """The final policies of a population, fetched from the devices once after training. Every array has a
+    leading agent axis (A, ...); padding agents are dropped."""
+
+    env: EnvInfo
+    """The env the policies act in (masked observation dims, action space)."""
+    actor: dict
+    """Flax params of the actor MLP, {"params": {"Dense_i": {"kernel": (A, in, out), "bias": (A, out)}}};
+    its output is the logits (Discrete) or the Gaussian means (Box)."""
+    critic: dict
+    """The same for the critic (its last layer has one output, the value)."""
+    log_std: np.ndarray | None
+    """(A, action_dim) state-independent log std for Box actions; None for Discrete."""
+
+    @staticmethod
+    def from_params(env: EnvInfo, params, n: int) -> "Policies":
+        """From a :class:`~ermrl.ppo.networks.PolicyParams` of NumPy arrays (padded agents first dropped)."""
+        take = lambda x: np.asarray(x)[:n]
+        return Policies(env, _map(take, params.actor), _map(take, params.critic),
+                        None if params.log_std is None else take(params.log_std))
+
+    def select(self, idx) -> "Policies":
+        take = lambda x: x[np.asarray(idx)]
+        return Policies(self.env, _map(take, self.actor), _map(take, self.critic),
+                        None if self.log_std is None else take(self.log_std))
+
+
+def _map(fn, tree):
+    """``fn`` over the leaves of a nested dict."""
+    return {k: _map(fn, v) if isinstance(v, dict) else fn(v) for k, v in tree.items()}
 
 
 def fitness(episodes: Episodes, last: int = FITNESS_EPISODES) -> float:
@@ -55,9 +90,12 @@ class Results:
     """name -> (A, n_iterations) PPO diagnostics."""
     compile_s: float
     train_s: float
+    policies: Policies | None = None
+    """Every agent's final policy (None when the results were built without one)."""
 
     @staticmethod
-    def from_iterations(config, population, finished, metrics, finite, n_envs, compile_s, train_s) -> "Results":
+    def from_iterations(config, population, finished, metrics, finite, n_envs, compile_s, train_s,
+                        policies: Policies | None = None) -> "Results":
         """Assembles per-iteration logs: ``finished`` is a list of (returns, lengths), each (A, n_steps, n_envs)."""
         per_iter = config.ppo.buffer_size
         episodes = []
@@ -75,7 +113,7 @@ class Results:
             env_id=config.env_id, total_timesteps=len(finished) * per_iter, timesteps_per_iteration=per_iter,
             seeds=np.asarray(population.seeds), phi={f: np.asarray(v) for f, v in population.phi._asdict().items()},
             learning_rate=np.asarray(population.learning_rate), episodes=episodes, finite=np.asarray(finite),
-            metrics=stacked, compile_s=compile_s, train_s=train_s,
+            metrics=stacked, compile_s=compile_s, train_s=train_s, policies=policies,
         )
 
     @property
@@ -111,7 +149,8 @@ class Results:
         return dataclasses.replace(
             self, seeds=self.seeds[idx], phi={k: v[idx] for k, v in self.phi.items()},
             learning_rate=self.learning_rate[idx], episodes=[self.episodes[i] for i in idx], finite=self.finite[idx],
-            metrics={k: v[idx] for k, v in self.metrics.items()})
+            metrics={k: v[idx] for k, v in self.metrics.items()},
+            policies=None if self.policies is None else self.policies.select(idx))
 
     def agent_steps_per_s(self) -> float:
         return self.size * self.total_timesteps / self.train_s if self.train_s > 0 else float("nan")

@@ -25,7 +25,7 @@ from ermrl.ppo import update as ppo_update
 from ermrl.ppo.config import PPOConfig
 from ermrl.ppo.losses import Batch, bootstrapped_gae
 from ermrl.ppo.networks import ActorCritic
-from ermrl.training.results import Results
+from ermrl.training.results import Policies, Results
 from ermrl.envs import HostEnv, JaxEnv
 from ermrl.training.rollout import EnvCarry, Step, collect, start, start_from_obs
 
@@ -137,7 +137,12 @@ class AgentFns(NamedTuple):
 
 
 def make_agent_fns(config: TrainConfig) -> AgentFns:
-    """Builds the per-agent functions for ``config``'s env, agent and PPO settings."""
+    """Builds the per-agent functions for ``config``'s env, agent and PPO settings (``ppo.model = "lstm"``: the
+    recurrent baseline's, :func:`ermrl.training.recurrent.make_recurrent_fns`)."""
+    if config.ppo.model == "lstm":
+        from ermrl.training.recurrent import make_recurrent_fns
+
+        return make_recurrent_fns(config)
     env = envs.make(config.env_id, config.backend, config.env_workers)
     agent = Agent(config.agent, env.info)
     net = ActorCritic(env.info.action, config.ppo.hidden, config.ppo.log_std_init)
@@ -244,7 +249,8 @@ class Trainer:
         return self.compiled(state)(state)
 
     def _loop(self, compiled, state: AgentState, n: int, compile_s: float, progress_fn):
-        """The host loop over iterations: gathers finished episodes and metrics of the first n agents."""
+        """The host loop over iterations: gathers finished episodes and metrics of the first n agents; returns
+        them with the final state."""
         steps_per_iter = self.config.ppo.buffer_size
         finished: list[tuple[np.ndarray, np.ndarray]] = []
         metrics, finite = [], np.ones(n, bool)
@@ -258,10 +264,11 @@ class Trainer:
             if progress_fn is not None:
                 progress_fn(Progress(it + 1, self.n_iterations, (it + 1) * steps_per_iter * n,
                                      self.n_iterations * steps_per_iter * n, time.perf_counter() - t1, compile_s))
-        return finished, metrics, finite
+        return finished, metrics, finite, state
 
     def run(self, population: Population, progress_fn: Callable[[Progress], None] | None = None) -> Results:
-        """Trains every agent of ``population`` for ``total_timesteps``; returns curves and fitness."""
+        """Trains every agent of ``population`` for ``total_timesteps``; returns curves, fitness and every
+        agent's final policy (``Results.policies``)."""
         ppo = self.config.ppo
         n = population.size
         t0 = time.perf_counter()
@@ -269,13 +276,15 @@ class Trainer:
             state = self.init(population)
             compiled = self.compiled(state)
             compile_s = time.perf_counter() - t0
-            finished, metrics, finite = self._loop(compiled, state, n, compile_s, progress_fn)
+            finished, metrics, finite, state = self._loop(compiled, state, n, compile_s, progress_fn)
+            # the final policies, in one transfer after the loop (the first n agents; padding dropped)
+            policies = Policies.from_params(self.env.info, jax.device_get(state.learner.params), n)
         finally:
             self.close()
         train_s = time.perf_counter() - t0 - compile_s
         return Results.from_iterations(
             config=self.config, population=population, finished=finished, metrics=metrics, finite=finite,
-            n_envs=ppo.n_envs, compile_s=compile_s, train_s=train_s,
+            n_envs=ppo.n_envs, compile_s=compile_s, train_s=train_s, policies=policies,
         )
 
 

@@ -1,0 +1,193 @@
+"""``ermrl analyze hp-map|probe|context|fft``: the HP map across studies, the probe of what a reservoir's context
+holds, and a saved agent's context and its rhythm."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ermrl.cli import options
+from ermrl.errors import ConfigError
+
+
+def add_parser(sub, formatter) -> None:
+    p = sub.add_parser("analyze", help="analyses: the HP map of several evolutions, the velocity probe",
+                       description="`ermrl analyze hp-map STUDY [STUDY ...] --out FIG.png` draws the best Φ of "
+                                   "several studies on spectral radius × leak rate (the paper's HP map); "
+                                   "`ermrl analyze probe --env NOVEL_ID` measures how well a linear readout of "
+                                   "the reservoir recovers the deleted velocities and predicts o_(t+k).",
+                       formatter_class=formatter)
+    asub = p.add_subparsers(dest="analyze_command", required=True, metavar="hp-map|probe|context|fft")
+    hp = asub.add_parser("hp-map", help="the top trials of several studies on sr × lr (log axes)",
+                         description="Draw the --top best completed trials of each study on spectral radius × leak "
+                                     "rate (log axes), one colour per env, circles for 1-reservoir studies and, in a "
+                                     "second panel for 2-reservoir studies, circles for reservoir 1 and triangles for "
+                                     "reservoir 2 (paper appendix, HP map). The points drawn go to a CSV beside the "
+                                     "figure.", formatter_class=formatter)
+    hp.add_argument("studies", nargs="+", metavar="STUDY", help="study names, as given to or printed by `ermrl evolve`")
+    hp.add_argument("--storage", default=None,
+                    help="Optuna storage URL or journal file holding every study (default: each study's sqlite in "
+                         "runs/STUDY)")
+    hp.add_argument("--top", type=int, default=30, help="best completed trials drawn per study")
+    hp.add_argument("--out", type=Path, required=True, metavar="FIG.png",
+                    help="figure path (.png, .svg or .pdf); FIG.csv beside it holds the points drawn")
+    options.add_config_option(hp)
+
+    pr = asub.add_parser("probe", help="R² of a ridge readout of the reservoir: deleted velocities, o_(t+k)",
+                         description="Feed a reservoir with (masked o_t, a_(t-1), r_(t-1)) from random-policy "
+                                     "episodes of the full env, fit a ridge readout (scikit-learn) on 75%% of the "
+                                     "episodes and report R² on the rest: for the deleted velocities and for the "
+                                     "kept observation k = 1..5 steps ahead (paper appendix, Results analysis). Rows: "
+                                     "the default Φ (sr 0.95, lr 0.5, iss 1), a memoryless reservoir (sr 1e-4, lr 1), "
+                                     "each --phi, and each --study's Φ*.", formatter_class=formatter)
+    pr.add_argument("--env", required=True, help="a NoVel env id, e.g. CartPoleNoVel-v1")
+    pr.add_argument("--phi", nargs=3, type=float, action="append", default=[], metavar=("SR", "LR", "ISS"),
+                    help="a 1-reservoir Φ to probe (repeatable)")
+    pr.add_argument("--study", action="append", default=[], metavar="NAME",
+                    help="probe this study's Φ* (the selected trial, else the best; repeatable)")
+    pr.add_argument("--storage", default=None, help="Optuna storage URL or journal file of the studies "
+                                                    "(default: each study's sqlite in runs/STUDY)")
+    pr.add_argument("--units", type=int, default=100, help="units per reservoir")
+    pr.add_argument("--episodes", type=int, default=300, help="random-policy episodes (a quarter held out)")
+    pr.add_argument("--seed", type=int, default=0, help="seeds the episodes and the reservoir draw")
+    pr.add_argument("--out", type=Path, required=True, metavar="FIG.png",
+                    help="figure path; FIG.md beside it holds the R² table")
+    options.add_config_option(pr)
+
+    cx = asub.add_parser("context", help="a saved agent's observation traces above its first reservoir units",
+                         description="Run one deterministic episode of a saved ER-MRL agent and plot the observation "
+                                     "traces above the first --units reservoir units (paper appendix, Fig. "
+                                     "context-observation).", formatter_class=formatter)
+    cx.add_argument("source", type=Path, metavar="RUN", help="a run folder (its first saved agent) or an agent file")
+    cx.add_argument("--out", type=Path, default=None, metavar="FIG.png", help="figure (default RUN/context.png)")
+    cx.add_argument("--units", type=int, default=20, help="reservoir units plotted")
+    _episode_options(cx)
+
+    ff = asub.add_parser("fft", help="spectra and rhythm score of saved agents' summed observation and context",
+                         description="For every saved agent of each RUN (e.g. a test phase's ER-MRL and PPO "
+                                     "folders), one deterministic episode: the rhythm score (fraction of spectral "
+                                     "power near the dominant frequency) of the summed observation and of the summed "
+                                     "policy input (the context; for PPO the observation). Prints a table, writes it "
+                                     "beside the spectra figure (paper appendix, the CPG argument).",
+                         formatter_class=formatter)
+    ff.add_argument("sources", nargs="+", type=Path, metavar="RUN", help="run folders or agents/ folders or agent files")
+    ff.add_argument("--out", type=Path, required=True, metavar="FIG.png",
+                    help="spectra figure; FIG.md (table) and FIG.json (per agent) beside it")
+    _episode_options(ff)
+
+
+def _episode_options(p) -> None:
+    p.add_argument("--seed", type=int, default=0, help="env reset seed of the recorded episode")
+    p.add_argument("--max-steps", type=int, default=None, help="stop the episode after this many steps")
+    options.add_config_option(p)
+
+
+def run_command(args) -> int:
+    return {"hp-map": cmd_hp_map, "probe": cmd_probe, "context": cmd_context, "fft": cmd_fft}[args.analyze_command](args)
+
+
+def _load(name: str, storage: str | None):
+    """Study ``name`` from ``storage`` (default: its sqlite in runs/NAME), without creating any file."""
+    from ermrl.cli.commands import _storage
+    from ermrl.evolution.study import load_study, storage_file
+
+    url = _storage(argparse.Namespace(study=name, storage=storage, out=None))
+    file = storage_file(url)
+    if file is not None and not file.exists():  # looking must not create a database
+        raise ConfigError(f"no study {name!r}: {file} does not exist; run `ermrl evolve --study {name}` first "
+                          "or pass --storage")
+    return load_study(url, name)
+
+
+def cmd_hp_map(args) -> int:
+    import optuna
+
+    from ermrl.analysis.hp_map import cross_study_hp_map, points_csv
+
+    if args.top < 1:
+        raise ConfigError(f"--top must be >= 1, got {args.top}")
+    if args.out.is_dir():
+        raise ConfigError(f"--out {args.out} is a folder; give a figure path such as {args.out / 'hp_map.png'}")
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    studies = []
+    for name in dict.fromkeys(args.studies):  # each study once, in the given order
+        studies.append(_load(name, args.storage))
+    path = cross_study_hp_map(studies, args.out, args.top)
+    print(f"wrote {path} and {points_csv(path)} (top {args.top} trials of {len(studies)} "
+          f"stud{'ies' if len(studies) > 1 else 'y'})")
+    return 0
+
+
+def cmd_probe(args) -> int:
+    import optuna
+
+    from ermrl import storage
+    from ermrl.agent import Phi
+    from ermrl.analysis import probe
+    from ermrl.envs import masking
+    from ermrl.evolution.selection import chosen_trial
+    from ermrl.evolution.study import ATTR
+
+    if args.units < 1 or args.episodes < 4:
+        raise ConfigError(f"--units must be >= 1 and --episodes >= 4, got {args.units} and {args.episodes}")
+    if args.out.is_dir():
+        raise ConfigError(f"--out {args.out} is a folder; give a figure path such as {args.out / 'probe.png'}")
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    rows: list[tuple[str, Phi]] = [("default Φ", probe.MEMORY), ("memoryless", probe.MEMORYLESS)]
+    rows += [(f"Φ {i + 1}", Phi(*v)) for i, v in enumerate(args.phi)]
+    for name in dict.fromkeys(args.study):
+        study = _load(name, args.storage)
+        config = storage.decode_study_record(study.user_attrs[ATTR])
+        if config.space.reservoirs and config.train.agent.spec.units != args.units:
+            raise ConfigError(f"study {name!r} evolved {config.train.agent.spec.units}-unit reservoirs; "
+                              f"pass --units {config.train.agent.spec.units}")
+        trial, phi, _ = chosen_trial(study, config)
+        rows.append((f"{name} Φ* (trial {trial.number})", phi))
+    base_id, _ = masking.parse(args.env)
+    rollouts = probe.collect(base_id, args.episodes, args.seed)
+    results = [probe.probe(args.env, phi, units=args.units, seed=args.seed, label=label, rollouts=rollouts)
+               for label, phi in rows]
+    table = probe.probe_table(results)
+    path = probe.plot_probe(results, args.out)
+    storage.write_text(path.with_suffix(".md"), table)
+    print(table, end="")
+    print(f"wrote {path} and {path.with_suffix('.md')}")
+    return 0
+
+
+def _agents(source: Path) -> list[Path]:
+    from ermrl import storage
+
+    if source.is_file():
+        return [source]
+    if not source.is_dir():
+        raise ConfigError(f"{source} does not exist; give a run folder or a saved agent file (.npz)")
+    found = storage.find_agents(source)
+    if not found:
+        raise ConfigError(f"{source} holds no saved agent; train with --save-agents (the default) first")
+    return found
+
+
+def cmd_context(args) -> int:
+    from ermrl.analysis.context import context_figure
+
+    agents = _agents(args.source)
+    out = args.out or (args.source if args.source.is_dir() else args.source.parent) / "context.png"
+    path = context_figure(agents[0], out, args.seed, args.units, args.max_steps)
+    print(f"wrote {path} ({agents[0]})")
+    return 0
+
+
+def cmd_fft(args) -> int:
+    from ermrl import storage
+    from ermrl.analysis.rhythm import compare_runs
+
+    if args.out.is_dir():
+        raise ConfigError(f"--out {args.out} is a folder; give a figure path such as {args.out / 'fft.png'}")
+    sources = {str(s): _agents(s) for s in dict.fromkeys(args.sources)}
+    table, rows = compare_runs(sources, args.out, args.seed, args.max_steps)
+    storage.write_text(args.out.with_suffix(".md"), table)
+    storage.write_json(args.out.with_suffix(".json"), rows)
+    print(table, end="")
+    print(f"wrote {args.out.with_suffix('.png')}, {args.out.with_suffix('.md')} and {args.out.with_suffix('.json')}")
+    return 0

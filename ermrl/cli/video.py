@@ -1,0 +1,55 @@
+"""``ermrl video``: renders episodes of a saved agent to an MP4 or GIF file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ermrl.errors import ConfigError
+
+
+def add_parser(sub, formatter) -> None:
+    p = sub.add_parser("video", help="render episodes of a saved agent to an MP4 or GIF file",
+                       description="Load a saved agent (the first one of RUN, or --agent FILE), run it in its "
+                                   "Gymnasium env with render_mode='rgb_array' and write the frames with imageio. "
+                                   "MuJoCo envs render headless (OSMesa or EGL, see MUJOCO_GL).",
+                       formatter_class=formatter)
+    p.add_argument("run", type=Path, nargs="?", default=None,
+                   help="run folder (from `ermrl train`, a test phase or a study folder): films its first saved agent")
+    p.add_argument("--agent", type=Path, default=None, metavar="FILE", help="the agent file (.npz) to film")
+    p.add_argument("--out", type=Path, default=None, metavar="FILE.mp4|.gif",
+                   help="video file (default RUN/videos/AGENT-env-seedS.mp4)")
+    p.add_argument("--episodes", type=int, default=1, help="episodes, one after the other in one file")
+    p.add_argument("--seed", type=int, default=0, help="env seed of the first episode (then seed + 1, ...)")
+    p.add_argument("--max-steps", type=int, default=None, metavar="N", help="cut each episode after N steps")
+    p.add_argument("--stochastic", action="store_true",
+                   help="sample actions from the policy instead of taking its mode (argmax or mean)")
+    p.add_argument("--fps", type=float, default=None, help="frames per second; None: the env's render_fps")
+
+
+def run_command(args) -> int:
+    from ermrl.analysis.video import write_video
+    from ermrl.saved_agent import load_agent
+
+    if args.agent is None and args.run is None:
+        raise ConfigError("give a run folder (ermrl video RUN) or an agent file (--agent FILE)")
+    if args.run is not None and not args.run.is_dir():
+        raise ConfigError(f"run folder {args.run} does not exist; give a folder written by `ermrl train` or "
+                          "`ermrl test`")
+    agent = load_agent(args.agent if args.agent is not None else args.run)
+    folder = args.run if args.run is not None else agent.path.parent
+    out = args.out or folder / "videos" / f"{_name(agent.path, folder)}-env-seed{args.seed}.mp4"
+    video = write_video(agent, out, args.episodes, args.seed, args.max_steps, not args.stochastic, args.fps)
+    returns = ", ".join(f"{r:.1f}" for r in video.returns)
+    print(f"agent {agent.path} ({agent.env_id}, seed {agent.seed})")
+    print(f"wrote {video.path}: {video.frames} frames at {video.fps:g} fps; {len(video.returns)} episode(s), "
+          f"returns {returns}, lengths {', '.join(map(str, video.lengths))}")
+    return 0
+
+
+def _name(path: Path, folder: Path) -> str:
+    """The agent's name in the video's: its path under ``folder`` without agents/ folders, e.g. ermrl-seed1000."""
+    try:
+        parts = path.with_suffix("").relative_to(folder).parts
+    except ValueError:
+        parts = (path.stem,)
+    return "-".join(p for p in parts if p != "agents") or path.stem
