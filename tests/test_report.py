@@ -124,3 +124,22 @@ def test_figures_standalone(tmp_path):
         path = fn(study, tmp_path / "figs" / name)
         assert path == tmp_path / "figs" / name and path.read_bytes()[:8] == PNG_MAGIC
     assert hp_map(study, tmp_path / "top5.png", top=5).stat().st_size > 0
+
+
+def test_report_embeds_the_analyses_it_finds(tmp_path):
+    """Analyses written into the run folder (context figure, fft/probe figures with their Markdown tables, videos)
+    appear after the test phases and before the evolution's figures; the configuration stays last."""
+    study = make_study(1)
+    tiny_png(tmp_path / "context.png")
+    tiny_png(tmp_path / "fft.png")
+    (tmp_path / "fft.md").write_text("| run | rhythm |\n|---|---|\n| ermrl | 0.91 |\n")
+    tiny_png(tmp_path / "unrelated.png")  # no table beside it: not an analysis
+    (tmp_path / "test" / "videos").mkdir(parents=True)
+    (tmp_path / "test" / "videos" / "ermrl-seed1000.mp4").write_bytes(b"\0")
+    doc = write_report(study, tmp_path).read_text()
+    section = doc[doc.index("<h2>Analyses</h2>"):doc.index("<h2>Fitness over trials</h2>")]
+    assert "<h3>context</h3>" in section and "<h3>fft</h3>" in section and "unrelated" not in section
+    assert section.count("data:image/png;base64,") == 2 and "| ermrl | 0.91 |" in section
+    assert '<a href="test/videos/ermrl-seed1000.mp4">' in section
+    assert doc.index("<h2>Analyses</h2>") < doc.index("<summary>Configuration</summary>")
+    assert "<h2>Analyses</h2>" not in write_report(make_study(1), tmp_path / "bare").read_text()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import html
 import math
+import os
 from pathlib import Path
 
 import matplotlib
@@ -201,10 +202,35 @@ def test_dirs(run_dir: Path) -> list[Path]:
     return [d for d in found if (d / "summary.json").is_file()]
 
 
+VIDEO_SUFFIXES = (".mp4", ".gif")
+
+
+def analysis_section(run_dir: Path, out_dir: Path) -> list[str]:
+    """HTML of the analyses found in ``run_dir``: ``context.png`` (``ermrl analyze context``), every figure in
+    ``run_dir/analyses/`` or beside a Markdown table of the same name (``ermrl analyze fft|probe --out``) with
+    that table, embedded; and links to the videos (``ermrl video``), relative to ``out_dir``."""
+    figures = [f for f in [run_dir / "context.png", *sorted(run_dir.glob("analyses/*.png")),
+                           *sorted(p for p in run_dir.glob("*.png") if p.with_suffix(".md").is_file())]
+               if f.is_file()]
+    videos = sorted(p for p in run_dir.rglob("videos/*") if p.suffix in VIDEO_SUFFIXES)
+    if not figures and not videos:
+        return []
+    parts = ["<h2>Analyses</h2>"]
+    for fig in dict.fromkeys(figures):
+        parts += [f"<h3>{html.escape(fig.stem)}</h3>", _img(fig, fig.stem)]
+        if fig.with_suffix(".md").is_file():
+            parts.append(f"<pre>{html.escape(fig.with_suffix('.md').read_text())}</pre>")
+    if videos:
+        links = "".join(f'<li><a href="{html.escape(os.path.relpath(v, out_dir))}">{html.escape(v.name)}</a></li>'
+                        for v in videos)
+        parts.append(f"<h3>Videos</h3><ul>{links}</ul>")
+    return parts
+
+
 def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | None = None) -> Path:
     """Writes ``<run_dir>/report.html`` (or ``out``), with fitness_over_trials.png and hp_map.png beside it in
-    run_dir. Results come first (best and selected Φ, test phases with their statistics), then the evolution's
-    figures, failed trials, and the configuration (collapsed)."""
+    run_dir. Results come first (best and selected Φ, test phases with their statistics, the analyses found in
+    run_dir), then the evolution's figures, failed trials, and the configuration (collapsed)."""
     run_dir = Path(run_dir)
     out = Path(out) if out is not None else run_dir / "report.html"
     cfg = study.user_attrs.get("ermrl", {})
@@ -245,6 +271,7 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
         parts.append("<h2>Test phases</h2>")
         for d in tests:
             parts += test_phase_section(d, run_dir)
+    parts += analysis_section(run_dir, out.parent)
 
     parts += ["<h2>Fitness over trials</h2>",
               _img(fitness_over_trials(study, run_dir / "fitness_over_trials.png"), "fitness over trials"),
