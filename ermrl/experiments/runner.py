@@ -156,7 +156,7 @@ def _test_done(out: Path, test: TestConfig, winner: int) -> bool:
     path = out / "test_config.json"
     if not (path.is_file() and (out / "summary.json").is_file()):
         return False
-    saved = storage.read_json(path)
+    saved = {**storage.to_dict(TestConfig()), **storage.read_json(path)}  # a key added later: its default
     want = {**storage.to_dict(test), "trial": test.trial}
     return saved.get("phi_trial") == winner and all(saved.get(k) == (list(v) if isinstance(v, tuple) else v)
                                                      for k, v in want.items())
