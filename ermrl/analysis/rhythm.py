@@ -143,8 +143,9 @@ def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0
         steps = np.mean([r["steps"] for r in found])
         lines.append(f"| {label} | {len(found)} | {steps:.0f} | {obs.mean():.3f} ± {obs.std():.3f} | "
                      f"{inp.mean():.3f} ± {inp.std():.3f} |")
-        signals[f"{label}: summed observation"] = found[0]["summed_observation"]
+        short = Path(label).name or label
+        signals[f"{short}: summed observation"] = found[0]["summed_observation"]
         if found[0]["reservoirs"]:
-            signals[f"{label}: summed context"] = found[0]["summed_input"]
+            signals[f"{short}: summed context"] = found[0]["summed_input"]
     plot_spectra(signals, path)
     return "\n".join(lines) + "\n", [{k: v for k, v in r.items() if not k.startswith("summed")} for r in rows]
