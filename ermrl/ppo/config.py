@@ -42,13 +42,16 @@ class PPOConfig:
     baseline, sb3-contrib RecurrentPPO's MlpLstmPolicy (separate actor and critic LSTMs on the raw observation,
     then the same MLPs), trained end to end (see :mod:`ermrl.ppo.recurrent`). JAX backend and no reservoir only."""
     lstm_hidden_size: int = 64
-    """Units of each LSTM (model "lstm"). sb3-contrib's default is 256; 64 is what rl-zoo's tuned RecurrentPPO
-    settings for CartPoleNoVel-v1 and PendulumNoVel-v1 use (hyperparams/ppo_lstm.yml)."""
+    """Units of each LSTM (model "lstm"). sb3-contrib's default is 256; 64 is what rl-baselines3-zoo's tuned
+    RecurrentPPO settings for CartPoleNoVel-v1 and PendulumNoVel-v1 use (hyperparams/ppo_lstm.yml, commit
+    c94924e: ``lstm_hidden_size=64``; their other tuned values, e.g. 8 envs × 32 steps for CartPole, are not
+    taken: the rest stays at SB3's PPO defaults, as for our PPO)."""
     lstm_seq_len: int = 64
-    """Steps per training sequence (model "lstm"): the update cuts the rollout into windows of this many
-    consecutive steps of one env's data (the truncated-BPTT length), each starting from the LSTM state stored
-    during the rollout; batch_size must be a multiple of it. At batch_size = lstm_seq_len (64, the default with
-    SB3's batch_size) a minibatch is one window, the same steps sb3-contrib's minibatch holds."""
+    """Steps per training sequence (model "lstm"), the truncated-BPTT length: each epoch cuts the rollout into
+    windows of this many consecutive steps from a random offset; a window starts from the LSTM state stored during
+    the rollout (as does another env's first step inside it) and episode starts reset the state within it
+    (:mod:`ermrl.ppo.recurrent_update`). batch_size must be a multiple of it; at batch_size = lstm_seq_len (64 with
+    SB3's batch_size) a minibatch is one window, the same steps as an sb3-contrib minibatch."""
 
     def __post_init__(self):
         buffer = self.n_steps * self.n_envs
