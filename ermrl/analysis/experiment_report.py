@@ -6,50 +6,13 @@ from __future__ import annotations
 import html
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ermrl import storage  # noqa: E402
-from ermrl.analysis import statistics  # noqa: E402
-from ermrl.analysis.html import img, page, table  # noqa: E402
-from ermrl.analysis.report import phi, ranked, test_dirs, test_phase_section  # noqa: E402
-
-MARKERS = {1: "o", 2: "^", 3: "s"}
-
-
-def hp_map_across_studies(studies: list, path: Path, top: int = 30) -> Path:
-    """The paper's HP map: the ``top`` trials of each study on spectral radius × leak rate (log axes), one colour
-    per env, circles for 1 reservoir and triangles for 2 (squares for 3); each reservoir of a trial is a point."""
-    fig, ax = plt.subplots(figsize=(6.5, 5))
-    colours = {}
-    for study in studies:
-        cfg = study.user_attrs.get("ermrl", {})
-        env = "+".join(cfg.get("envs") or [cfg.get("env_id", study.study_name)])
-        k = int(cfg.get("reservoirs", 1))
-        colour = colours.setdefault(env, f"C{len(colours) % 10}")
-        points = [(p["sr"][r], p["lr"][r]) for t in ranked(study)[:top] for p in [phi(t, k)] for r in range(k)
-                  if len(p.get("sr", [])) > r and len(p.get("lr", [])) > r]
-        if points:
-            sr, lr = zip(*points)
-            ax.scatter(sr, lr, color=colour, marker=MARKERS.get(k, "D"), s=30, alpha=0.75, edgecolors="k",
-                       linewidths=0.3, label=f"{env}, {k} reservoir{'s' if k > 1 else ''}")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("spectral radius (sr)")
-    ax.set_ylabel("leak rate (lr)")
-    ax.set_title(f"top {top} Φ of each study")
-    ax.grid(alpha=0.3, which="both")
-    if colours:
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    with storage.atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return Path(path)
-
+from ermrl import storage
+from ermrl.analysis import statistics
+from ermrl.analysis.html import img, page, table
+from ermrl.analysis.hp_map import cross_study_hp_map
+from ermrl.analysis.report import ranked, test_dirs, test_phase_section
 
 def normalized_test_scores(rows_by_env: dict[str, list[dict]], random_returns: dict[str, float]) -> dict[str, np.ndarray]:
     """{model kind: (n_seeds, n_envs)} final scores normalized per env as (score − random) / (PPO − random),
@@ -110,7 +73,7 @@ def write_experiment_report(experiment, scale, plans, storage_url: str, folder: 
                   img(statistics.performance_profile(scores, folder / "performance_profile.png"), "performance profile")]
     if experiment.hp_map and studies:
         parts += ["<h2>HP map across studies</h2>",
-                  img(hp_map_across_studies(studies, folder / "hp_map_across_studies.png"), "HP map")]
+                  img(cross_study_hp_map(studies, folder / "hp_map_across_studies.png"), "HP map")]
     for p in plans:
         sections = [s for d in test_dirs(p.run_dir) for s in test_phase_section(d, p.run_dir)]
         if sections:
