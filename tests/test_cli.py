@@ -65,3 +65,17 @@ def test_bad_input_is_one_line_and_exit_code_2(args, message, tmp_path):
     assert r.stderr.startswith(message), r.stderr
     assert r.stderr.count("\n") == 1
     assert not (tmp_path / "runs").exists()  # nothing written
+
+
+@pytest.mark.parametrize("value", ["abc", "0", "-2", "1.5"])
+def test_a_bad_cpu_device_count_is_refused_before_any_work(tmp_path, value):
+    import os
+
+    r = subprocess.run([sys.executable, "-m", "ermrl.cli", "train", "--env", "CartPole-v1", "--timesteps", "2048",
+                        "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=600,
+                       env={**os.environ, "ERMRL_CPU_DEVICES": value})
+    cores = os.cpu_count() or 1
+    assert r.returncode == 2 and r.stderr == (
+        f"ermrl train: error: ERMRL_CPU_DEVICES must be a whole number >= 1 (the CPU devices a population is sharded "
+        f"over), got {value!r}; unset it to use one per core ({cores})\n"), r.stderr
+    assert not (tmp_path / "run").exists()

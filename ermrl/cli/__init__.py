@@ -7,6 +7,7 @@ import argparse
 import os
 import sys
 
+import ermrl
 from ermrl.errors import ConfigError
 
 
@@ -59,6 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = parse(argv)
         command = f"ermrl {args.command}"
+        if ermrl.CPU_DEVICES_ERROR:
+            raise ConfigError(ermrl.CPU_DEVICES_ERROR)
         handlers = {**commands.COMMANDS, "experiment": experiment.run_command, "analyze": analyze.run_command,
                     "video": video.run_command}
         return handlers[args.command](args)
