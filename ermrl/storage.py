@@ -44,6 +44,23 @@ def atomic_path(path: Path | str):
             os.unlink(tmp)
 
 
+def check_folder(path: Path | str, flag: str = "--out") -> Path:
+    """``path`` if a folder is or can be made there: it is a folder, or its nearest existing parent is a writable
+    folder. Otherwise ConfigError (one line, naming ``flag``), so that a bad output path fails before any training
+    instead of losing the results at the end."""
+    path = Path(path)
+    for p in (path, *path.parents):
+        if not p.exists():
+            continue
+        if not p.is_dir():
+            where = f"{flag} {p}" if p == path else f"{flag} {path}: its parent {p}"
+            raise ConfigError(f"{where} is a file, not a folder; give a folder path (it is created if missing)")
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise ConfigError(f"{flag} {path}: cannot write in {p} (permission denied); give a folder you can write")
+        return path
+    return path
+
+
 def write_text(path: Path | str, text: str) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")

@@ -79,3 +79,35 @@ def test_a_bad_cpu_device_count_is_refused_before_any_work(tmp_path, value):
         f"ermrl train: error: ERMRL_CPU_DEVICES must be a whole number >= 1 (the CPU devices a population is sharded "
         f"over), got {value!r}; unset it to use one per core ({cores})\n"), r.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_output_paths_are_checked_before_any_training(tmp_path):
+    """An --out that is a file, lies under a file, or in a folder that cannot be written is refused in one line
+    before training (it used to train to the end and then die with a traceback, losing the results)."""
+    import os
+
+    afile = tmp_path / "afile"
+    afile.write_text("keep me")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    cases = [
+        (["train", "--env", "CartPole-v1", "--out", str(afile)],
+         f"ermrl train: error: --out {afile} is a file, not a folder; give a folder path (it is created if missing)"),
+        (["train", "--env", "CartPole-v1", "--out", str(afile / "run")],
+         f"ermrl train: error: --out {afile / 'run'}: its parent {afile} is a file, not a folder; give a folder path "
+         "(it is created if missing)"),
+        (["evolve", "--env", "CartPole-v1", "--study", "s", "--out", str(afile)],
+         f"ermrl evolve: error: --out {afile} is a file, not a folder; give a folder path (it is created if missing)"),
+        (["experiment", "run", "observed-units", "--scale", "smoke", "--out", str(afile)],
+         f"ermrl experiment: error: --out {afile} is a file, not a folder; give a folder path (it is created if "
+         "missing)"),
+    ]
+    if os.geteuid() != 0:  # root may write anywhere
+        locked.chmod(0o555)
+        cases.append((["train", "--env", "CartPole-v1", "--out", str(locked / "run")],
+                      f"ermrl train: error: --out {locked / 'run'}: cannot write in {locked} (permission denied); "
+                      "give a folder you can write"))
+    for args, message in cases:
+        r = ermrl(*args, "--timesteps", "2048") if args[0] != "experiment" else ermrl(*args)
+        assert r.returncode == 2 and r.stderr == message + "\n", r.stderr
+    assert afile.read_text() == "keep me" and set(tmp_path.iterdir()) == {afile, locked}  # nothing created

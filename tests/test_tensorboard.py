@@ -133,8 +133,8 @@ def test_tensorboard_at_a_file_is_one_line_and_exit_code_2(command, tmp_path):
     (tmp_path / "file").write_text("x")
     r = ermrl(*command, "--tensorboard", "file", cwd=tmp_path)
     assert r.returncode == 2
-    assert r.stderr == (f"ermrl {command[0]}: error: --tensorboard file is a file, not a folder; give a folder for "
-                        "the TensorBoard runs (it is created if missing)\n")
+    assert r.stderr == (f"ermrl {command[0]}: error: --tensorboard file is a file, not a folder; give a folder "
+                        "path (it is created if missing)\n")
     r = ermrl(*command, "--tensorboard", "file/tb", cwd=tmp_path)
     assert r.returncode == 2 and r.stderr.startswith(f"ermrl {command[0]}: error: --tensorboard file/tb: its parent "
                                                      "file is a file, not a folder"), r.stderr

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ermrl import storage
 from ermrl.errors import ConfigError
 
 TRAIN_TAGS = {"policy_loss": ("train/policy_gradient_loss", 1.0), "value_loss": ("train/value_loss", 1.0),
@@ -28,17 +29,8 @@ TRAIN_TAGS = {"policy_loss": ("train/policy_gradient_loss", 1.0), "value_loss": 
 
 
 def check_logdir(path: Path | str) -> Path:
-    """``path`` if a folder can be made there (it exists as a folder, or its nearest existing parent is one);
-    ConfigError (one line) otherwise, so that a bad ``--tensorboard`` fails before any training."""
-    path = Path(path)
-    for p in (path, *path.parents):
-        if p.exists():
-            if not p.is_dir():
-                what = "--tensorboard" if p == path else f"--tensorboard {path}: its parent"
-                raise ConfigError(f"{what} {p} is a file, not a folder; give a folder for the TensorBoard runs "
-                                  "(it is created if missing)")
-            return path
-    return path
+    """``path`` if TensorBoard runs can be written there; one-line ConfigError otherwise (before any training)."""
+    return storage.check_folder(path, "--tensorboard")
 
 
 class Timing:

@@ -109,7 +109,10 @@ def _study_location(p, required: bool = True) -> None:
 
 
 def _run_dir(args) -> Path:
-    return args.out or Path("runs") / args.study
+    """The study's folder (--out, else runs/STUDY), checked to be a folder that can be written."""
+    from ermrl import storage
+
+    return storage.check_folder(args.out or Path("runs") / args.study)
 
 
 def _storage(args) -> str:
@@ -185,7 +188,7 @@ def cmd_train(args) -> int:
     population = Population.grid(phi, args.seeds, config.ppo.learning_rate, k)
     label = "PPO-LSTM" if args.model == "lstm" else \
         "PPO" if k == 0 else f"ER-MRL ({k} reservoir{'s' if k > 1 else ''})"
-    out = args.out or Path("runs") / f"train-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
+    out = storage.check_folder(args.out or Path("runs") / f"train-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}")
 
     with TrainingBar(f"{args.env} × {args.seeds} seeds", enabled=not args.quiet) as bar:
         timing = tensorboard.Timing(bar.update)
@@ -219,6 +222,7 @@ def cmd_plot(args) -> int:
         if not (run / "curves.csv").is_file():
             raise ConfigError(f"{run} has no curves.csv; give folders written by `ermrl train` or `ermrl test`")
         curves.update(storage.read_curves_csv(run / "curves.csv"))
+    storage.check_folder(args.out.parent)
     title = args.title or storage.run_env_id(args.runs[0]) or ""
     for path in learning_curves(curves, title, args.out, ("png", "svg")):
         print(f"wrote {path}")

@@ -55,7 +55,7 @@ def run_command(args) -> int:
 def _run(args) -> int:
     import optuna
 
-    from ermrl import envs
+    from ermrl import envs, storage
     from ermrl.cli.commands import _bars
     from ermrl.evolution.study import make_storage
     from ermrl.experiments import registry, runner
@@ -65,7 +65,7 @@ def _run(args) -> int:
     unknown = [n for n in args.only if n not in names]
     if unknown:
         raise ConfigError(f"experiment {experiment.name} has no study {unknown[0]!r}; its studies: {', '.join(sorted(names))}")
-    folder = args.out or runner.experiment_dir(experiment, scale)
+    folder = storage.check_folder(args.out or runner.experiment_dir(experiment, scale))
     plans = [p for p in runner.plan(experiment, scale, folder, args.backend, args.env_workers)
              if not args.only or p.spec.name in args.only]
     for env_id in sorted({e for p in plans for e in p.config.env_ids + tuple(t.env_id for t in p.tests if t.env_id)}):

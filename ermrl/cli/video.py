@@ -27,6 +27,7 @@ def add_parser(sub, formatter) -> None:
 
 
 def run_command(args) -> int:
+    from ermrl import storage
     from ermrl.analysis.video import write_video
     from ermrl.saved_agent import load_agent
 
@@ -38,6 +39,7 @@ def run_command(args) -> int:
     agent = load_agent(args.agent if args.agent is not None else args.run)
     folder = args.run if args.run is not None else agent.path.parent
     out = args.out or folder / "videos" / f"{_name(agent.path, folder)}-env-seed{args.seed}.mp4"
+    storage.check_folder(out.parent)
     video = write_video(agent, out, args.episodes, args.seed, args.max_steps, not args.stochastic, args.fps)
     returns = ", ".join(f"{r:.1f}" for r in video.returns)
     print(f"agent {agent.path} ({agent.env_id}, seed {agent.seed})")
