@@ -184,3 +184,21 @@ def test_every_experiment_runs_end_to_end_and_resumes(name, tmp_path):
 @pytest.mark.parametrize("name", list(registry.EXPERIMENTS))
 def test_every_experiment_runs_at_smoke_scale(name, tmp_path):
     run_smoke(name, tmp_path)
+
+
+def test_a_finished_test_phase_is_kept_across_new_test_config_fields(tmp_path):
+    """A test phase saved before a TestConfig field existed (here: recurrent_baseline) counts as done for the same
+    settings and Φ*, so a resumed experiment does not redo it; other settings or another Φ* redo it."""
+    import dataclasses
+
+    from ermrl.experiments.evaluation import TestConfig
+
+    test = TestConfig(seeds=3, timesteps=4096, ermrl_lrs=(3e-4, 1e-4), env_id="Ant-v5", auc_steps=4096)
+    saved = {k: v for k, v in dataclasses.asdict(test).items() if k != "recurrent_baseline"}
+    (tmp_path / "test_config.json").write_text(json.dumps({**saved, "ermrl_lrs": [3e-4, 1e-4], "phi_trial": 7}))
+    assert not runner._test_done(tmp_path, test, 7)  # no summary yet: not finished
+    (tmp_path / "summary.json").write_text("[]")
+    assert runner._test_done(tmp_path, test, 7)
+    assert not runner._test_done(tmp_path, test, 8)
+    assert not runner._test_done(tmp_path, dataclasses.replace(test, seeds=4), 7)
+    assert not runner._test_done(tmp_path, dataclasses.replace(test, recurrent_baseline=True), 7)

@@ -12,6 +12,7 @@ from typing import Callable
 
 from ermrl import envs, storage
 from ermrl.agent import AgentConfig
+from ermrl.errors import ConfigError
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.experiments.evaluation import TestConfig
@@ -153,10 +154,16 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
 
 
 def _test_done(out: Path, test: TestConfig, winner: int) -> bool:
+    """Whether ``out`` holds this test phase, for this Φ* and settings, finished. The saved settings are decoded
+    first, so that fields added to TestConfig since they were written take their defaults instead of forcing
+    the test phase to be redone."""
     path = out / "test_config.json"
     if not (path.is_file() and (out / "summary.json").is_file()):
         return False
-    saved = {**storage.to_dict(TestConfig()), **storage.read_json(path)}  # a key added later: its default
-    want = {**storage.to_dict(test), "trial": test.trial}
-    return saved.get("phi_trial") == winner and all(saved.get(k) == (list(v) if isinstance(v, tuple) else v)
-                                                     for k, v in want.items())
+    saved = storage.read_json(path)
+    names = {f.name for f in dataclasses.fields(TestConfig)}
+    try:
+        before = storage.from_dict(TestConfig, {k: v for k, v in saved.items() if k in names}, "test_config")
+    except ConfigError:
+        return False
+    return saved.get("phi_trial") == winner and before == test
