@@ -61,6 +61,17 @@ def check_folder(path: Path | str, flag: str = "--out") -> Path:
     return path
 
 
+def save_figure(fig, path: Path | str, dpi: int = 120) -> Path:
+    """Writes the matplotlib figure ``fig`` to ``path`` as PNG, atomically, after ``tight_layout``; closes it."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
 def write_text(path: Path | str, text: str) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")

@@ -15,7 +15,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ermrl.errors import ConfigError  # noqa: E402
-from ermrl.storage import atomic_path  # noqa: E402
+from ermrl.storage import save_figure  # noqa: E402
 
 UNITS = 20
 """Reservoir units plotted by default."""
@@ -72,12 +72,7 @@ def plot_context(obs: np.ndarray, context: np.ndarray, path: Path | str, units: 
     bottom.grid(alpha=0.3)
     if title:
         top.set_title(title)
-    fig.tight_layout()
-    path = Path(path).with_suffix(".png")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
-    return path
+    return save_figure(fig, Path(path).with_suffix(".png"))
 
 
 def context_figure(source: Path | str, out: Path | str, seed: int = 0, units: int = UNITS,

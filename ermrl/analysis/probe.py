@@ -275,7 +275,7 @@ def plot_probe(results: list[ProbeResult], path: Path | str) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ermrl.storage import atomic_path
+    from ermrl.storage import save_figure
 
     if not results:
         raise ConfigError("plot_probe needs at least one ProbeResult; run probe() first")
@@ -294,9 +294,4 @@ def plot_probe(results: list[ProbeResult], path: Path | str) -> Path:
     for ax in (left, right):
         ax.set_ylim(min(0.0, *(min(r.r2_velocity, *r.r2_future) for r in results)) - 0.05, 1.05)
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path = Path(path).with_suffix(".png")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
-    return path
+    return save_figure(fig, Path(path).with_suffix(".png"))

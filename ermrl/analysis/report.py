@@ -69,11 +69,7 @@ def phi(trial: FrozenTrial, k: int) -> dict[str, list[float]]:
 
 
 def _save(fig, path: Path | str) -> Path:
-    fig.tight_layout()
-    with storage.atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return Path(path)
+    return storage.save_figure(fig, path, dpi=110)
 
 
 def fitness_over_trials(study: optuna.Study, path: Path | str) -> Path:

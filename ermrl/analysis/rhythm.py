@@ -81,7 +81,7 @@ def plot_spectra(named_signals: dict[str, np.ndarray], path: Path | str, dt: flo
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ermrl.storage import atomic_path
+    from ermrl.storage import save_figure
 
     if not named_signals:
         raise ConfigError("plot_spectra needs at least one signal, e.g. {'summed context': summed(states)}")
@@ -95,12 +95,7 @@ def plot_spectra(named_signals: dict[str, np.ndarray], path: Path | str, dt: flo
     ax.set_ylabel("power (fraction of non-DC)")
     ax.grid(alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    path = Path(path).with_suffix(".png")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
-    return path
+    return save_figure(fig, Path(path).with_suffix(".png"))
 
 
 def agent_rhythm(agent_file: Path | str, seed: int = 0, max_steps: int | None = None) -> dict:
