@@ -17,7 +17,7 @@ $(VENV)/.installed-base: pyproject.toml | $(BIN)/python
 
 # The tests run every listed env id, so they take the box2d and mujoco extras too, and video for `ermrl video`.
 $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
-	$(PIP) install -e '.[test,box2d,mujoco,video]'
+	$(PIP) install -e '.[test,box2d,mujoco,video,workers,dashboard]'
 	touch $@
 
 # MuJoCo renders videos headless through OSMesa (Debian's libosmesa6; about 130 MB installed with LLVM). As root
