@@ -23,6 +23,11 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 # MuJoCo renders videos headless through OSMesa (Debian's libosmesa6; about 130 MB installed with LLVM). As root
 # (CI) it is installed when missing; anyone else gets a note, and the MuJoCo video test is skipped without it or EGL.
 GL_PACKAGES := libosmesa6
+# Pages (the dashboard) are checked in headless Chromium (Debian's chromium, about 410 MB installed), the same way.
+BROWSER_PACKAGES := chromium
+# The multi-worker tests start a throwaway PostgreSQL server from Debian's binaries (initdb and pg_ctl, which Debian
+# keeps in /usr/lib/postgresql/VERSION/bin), the same way; without them those tests are skipped.
+PG_PACKAGES := postgresql
 system-deps:
 	@if $(PYTHON) -c "import ctypes.util, sys; sys.exit(ctypes.util.find_library('OSMesa') is None)"; then :; \
 	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
@@ -31,8 +36,22 @@ system-deps:
 	else \
 		echo "note: MuJoCo videos render headless with OSMesa: run 'sudo apt-get install $(GL_PACKAGES)' (Debian/Ubuntu); without it (or EGL) the MuJoCo video test is skipped"; \
 	fi
+	@if command -v chromium >/dev/null; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		echo "installing $(BROWSER_PACKAGES) (headless browser checks)"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(BROWSER_PACKAGES) >/dev/null; \
+	else \
+		echo "note: the dashboard page is checked in headless Chromium: run 'sudo apt-get install $(BROWSER_PACKAGES)' (Debian/Ubuntu); without it that test is skipped"; \
+	fi
+	@if command -v initdb >/dev/null || ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		echo "installing $(PG_PACKAGES) (the multi-worker tests' PostgreSQL server)"; \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(PG_PACKAGES) >/dev/null; \
+	else \
+		echo "note: the multi-worker tests start a PostgreSQL server: run 'sudo apt-get install $(PG_PACKAGES)' (Debian/Ubuntu); without it they are skipped"; \
+	fi
 
-# The reference pipeline (SB3 + ReservoirPy) lives in its own venv so that the default one never holds torch.
+# The reference pipeline (SB3, sb3-contrib, ReservoirPy) lives in its own venv so that the default one never holds torch.
 # torch first, pinned, so that pip takes the CPU wheel instead of a multi-GB CUDA build.
 REF_VENV ?= .venv-ref
 $(REF_VENV)/.installed: pyproject.toml
@@ -57,13 +76,15 @@ test-slow: $(VENV)/.installed-test
 
 reference: $(REF_VENV)/.installed
 
-# Tests that need torch and SB3: the wrapper under SB3, and PPO parity with SB3 (minutes).
+# Tests that need torch and SB3: the wrapper under SB3, PPO parity with SB3 and PPO-LSTM parity with sb3-contrib
+# RecurrentPPO (about 30 min on 2 cores).
 test-reference: $(REF_VENV)/.installed
 	$(REF_VENV)/bin/python -m pytest -q -m reference
 
-# PPO parity with SB3 on CartPole-v1 and Pendulum-v1 (5 seeds x 100k each; about 17 min on 2 cores).
+# PPO parity with SB3 on CartPole-v1 and Pendulum-v1 (5 seeds x 100k each; about 17 min on 2 cores), and PPO-LSTM
+# parity with sb3-contrib's RecurrentPPO on CartPoleNoVel-v1 (5 seeds x 50k; about 12 min on 2 idle cores).
 parity: $(REF_VENV)/.installed
-	$(REF_VENV)/bin/python -m pytest -q -s -m reference tests/test_parity_sb3.py
+	$(REF_VENV)/bin/python -m pytest -q -s -m reference tests/test_parity_sb3.py tests/test_parity_recurrent.py
 
 bench: $(VENV)/.installed-test $(REF_VENV)/.installed
 	$(BIN)/python benchmarks/throughput.py --repeats 3 --reference-python $(REF_VENV)/bin/python

@@ -65,7 +65,8 @@ def _lstm_step(params: dict, state: tuple[np.ndarray, np.ndarray] | None, x: np.
     for zeros. Returns the new (h, c)."""
     hidden = params["kernel_h"].shape[0]
     h, c = (np.zeros(hidden, np.float32),) * 2 if state is None else state
-    i, f, g, o = np.split(x @ params["kernel_x"] + params["bias"] + h @ params["kernel_h"], 4)
+    bias = params["bias_ih"] + params["bias_hh"] if "bias_ih" in params else params["bias"]  # "bias": older files
+    i, f, g, o = np.split(x @ params["kernel_x"] + bias + h @ params["kernel_h"], 4)
     sigmoid = lambda z: 1.0 / (1.0 + np.exp(-z))
     c = (sigmoid(f) * c + sigmoid(i) * np.tanh(g)).astype(np.float32)
     return (sigmoid(o) * np.tanh(c)).astype(np.float32), c

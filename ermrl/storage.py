@@ -1,64 +1,29 @@
 """Every file ermrl writes or reads, in one place: run folders, curves, summaries, the study record, tables.
 
-Every write goes to a temporary file in the same folder and is renamed over the target, so a crash never leaves
-a half-written file behind. Configs are frozen dataclasses; :func:`to_dict` and :func:`from_dict` are their
-typed codec (nested dataclasses, tuples, unions), and ``from_dict`` refuses unknown or mistyped keys with a
-one-line ConfigError, which is also how config files are checked.
+Every write goes to a temporary file in the same folder, is flushed to disk and renamed over the target, so a
+crash never leaves a half-written file behind; a folder of results is written beside its place and moved in whole
+(:func:`staged_folder`). Output paths are checked before any work (:func:`check_folder`, :func:`check_file`).
+Configs are frozen dataclasses; :func:`to_dict` and :func:`from_dict` are their typed codec (nested dataclasses,
+tuples, unions), and ``from_dict`` refuses unknown or mistyped keys with a one-line ConfigError, which is also how
+config files are checked.
 """
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import io
 import json
-import os
-import tempfile
 import types
 import typing
 from pathlib import Path
 
 import numpy as np
 
+from ermrl.atomic import atomic_path, check_file, check_folder, repair_journal, staged_folder  # noqa: F401
 from ermrl.errors import ConfigError
 
-# -- atomic writes -------------------------------------------------------------------------------------
-
-
-@contextlib.contextmanager
-def atomic_path(path: Path | str):
-    """Yields a temporary path beside ``path``; renames it over ``path`` when the block ends without error."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the final file gets the usual permissions
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def check_folder(path: Path | str, flag: str = "--out") -> Path:
-    """``path`` if a folder is or can be made there: it is a folder, or its nearest existing parent is a writable
-    folder. Otherwise ConfigError (one line, naming ``flag``), so that a bad output path fails before any training
-    instead of losing the results at the end."""
-    path = Path(path)
-    for p in (path, *path.parents):
-        if not p.exists():
-            continue
-        if not p.is_dir():
-            where = f"{flag} {p}" if p == path else f"{flag} {path}: its parent {p}"
-            raise ConfigError(f"{where} is a file, not a folder; give a folder path (it is created if missing)")
-        if not os.access(p, os.W_OK | os.X_OK):
-            raise ConfigError(f"{flag} {path}: cannot write in {p} (permission denied); give a folder you can write")
-        return path
-    return path
+# -- writing (atomic_path, staged_folder, check_folder, check_file, repair_journal: ermrl.atomic) ----------
 
 
 def save_figure(fig, path: Path | str, dpi: int = 120) -> Path:
@@ -202,9 +167,15 @@ def read_curves_csv(path: Path) -> Curves:
     cells: dict[str, dict[int, dict[int, float]]] = {}
     try:
         with open(path, newline="") as f:
-            for row in csv.DictReader(f):
+            reader = csv.DictReader(f)
+            for row in reader:
+                if None in row or None in row.values():  # a cut or damaged line: too few or too many fields
+                    fields = [v for k, v in row.items() if k is not None and v is not None] + row.get(None, [])
+                    raise ValueError(f"line {reader.line_num} has {len(fields)} fields, not {len(reader.fieldnames)}")
                 val = float(row["mean_return_100"]) if row["mean_return_100"] else np.nan
                 cells.setdefault(row["model"], {}).setdefault(int(row["seed"]), {})[int(row["timestep"])] = val
+        if not cells:
+            raise ValueError("no rows")
     except (KeyError, ValueError, TypeError) as e:
         raise ConfigError(f"{path} is not a curves file written by ermrl ({type(e).__name__}: {e}); "
                           "rerun the command that wrote it") from None

@@ -86,7 +86,8 @@ def test_the_run_folder_stores_the_effective_config(tmp_path):
 
 
 @pytest.mark.parametrize("text, suffix, message", [
-    ("unitz = 20\n", ".toml", "unknown option 'unitz'; options here: "),
+    ("unitz = 20\n", ".toml", "unknown option 'unitz' for `ermrl train`; did you mean 'units'?"),
+    ("color = 1\n", ".toml", "unknown option 'color' for `ermrl train`; options here: backend, bias, "),
     ('units = "many"\n', ".toml", "units has the wrong type: 'many'"),
     ("units = 2.5\n", ".toml", "units must be an integer, got 2.5"),
     ('bias = "gaussian"\n', ".toml", "bias must be one of bernoulli, none, got 'gaussian'"),

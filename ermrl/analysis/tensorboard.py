@@ -88,15 +88,16 @@ def write_scalars(logdir: Path | str, label: str, seeds, steps, scalars: dict[st
     folders = []
     for a, seed in enumerate(seeds):
         folder = _fresh(logdir / run_name(label, seed), taken)
-        writer = SummaryWriter(logdir=str(folder))
-        try:
-            for tag, values in scalars.items():
-                row = np.asarray(values, np.float64)[a]
-                for step, v in zip(steps, row):
-                    if np.isfinite(v):
-                        writer.add_scalar(tag, float(v), int(step))
-        finally:
-            writer.close()
+        with storage.staged_folder(folder) as stage:  # a run folder appears complete, or not at all
+            writer = SummaryWriter(logdir=str(stage))
+            try:
+                for tag, values in scalars.items():
+                    row = np.asarray(values, np.float64)[a]
+                    for step, v in zip(steps, row):
+                        if np.isfinite(v):
+                            writer.add_scalar(tag, float(v), int(step))
+            finally:
+                writer.close()
         folders.append(folder)
     return folders
 

@@ -4,26 +4,51 @@ from a config file), builds configs and calls the library."""
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import sys
+import traceback
 
 import ermrl
 from ermrl.errors import ConfigError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from ermrl.cli import analyze, commands, experiment, video
+    from ermrl.cli import analyze, commands, dashboard, experiment, video
 
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrorParser(
         prog="ermrl", description="Evolving Reservoirs for Meta Reinforcement Learning (ER-MRL), vectorized in JAX.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {ermrl.__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     formatter = argparse.ArgumentDefaultsHelpFormatter
     commands.add_parsers(sub, formatter)
     experiment.add_parser(sub, formatter)
     analyze.add_parser(sub, formatter)
     video.add_parser(sub, formatter)
+    dashboard.add_parser(sub, formatter)
+    _add_debug(parser)
     return parser
+
+
+class OneLineErrorParser(argparse.ArgumentParser):
+    """argparse's parser, whose errors (unknown flag, bad int, bad choice, missing argument) are a ConfigError:
+    one line naming the problem and pointing at the command's --help, no usage block; ``main`` exits 2."""
+
+    def error(self, message: str):
+        raise ConfigError(f"{message}; see `{self.prog} --help`")
+
+
+DEBUG_HELP = "on an error, print its full traceback before the one-line message"
+
+
+def _add_debug(parser: argparse.ArgumentParser) -> None:
+    """Adds ``--debug`` to ``parser`` and every (sub)subparser, so that it may follow any command."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in {id(p): p for p in action.choices.values()}.values():
+                _add_debug(child)
+    parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=DEBUG_HELP)
 
 
 def _subparser(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.ArgumentParser | None:
@@ -31,6 +56,8 @@ def _subparser(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Arg
     node = parser
     for word in argv:
         if word.startswith("-"):
+            if node is parser:  # ermrl's own flags (--debug) take no value: the command comes after them
+                continue
             break
         choices = next((a.choices for a in node._actions if isinstance(a, argparse._SubParsersAction)), None)
         if not choices or word not in choices:
@@ -45,27 +72,59 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = _parse_all(parser, argv)
     if getattr(args, "config", None) is not None:
         options.apply_config_file(_subparser(parser, argv), args.config)
-        args = parser.parse_args(argv)
+        args = _parse_all(parser, argv)
     return args
 
 
+def _parse_all(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    """``parser.parse_args(argv)``, with unknown flags reported by the (sub)command's parser, the closest
+    flag named (``--popsise`` -> ``--popsize``)."""
+    import difflib
+
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        node = _subparser(parser, argv) or parser
+        flags = [f for a in node._actions for f in a.option_strings if f.startswith("--")]
+        word = next((w.split("=")[0] for w in extra if w.startswith("--")), None)
+        close = difflib.get_close_matches(word, flags, n=1, cutoff=0.75) if word else []
+        node.error(f"unrecognized arguments: {' '.join(extra)}" + (f" (did you mean {close[0]}?)" if close else ""))
+    return args
+
+
+def _write_refused(e: BaseException | None) -> str | None:
+    """The system's reason when ``e`` or an exception behind it is a refused write (disk full, quota, file too
+    large, read-only), as OSError or as SQLite says it; None for anything else."""
+    while e is not None:
+        if isinstance(e, OSError) and e.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS):
+            return e.strerror + (f" ({e.filename})" if e.filename else "")
+        for text in ("database or disk is full", "attempt to write a readonly database"):
+            if text in str(e):
+                return text
+        e = e.__cause__ or e.__context__
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
-    from ermrl.cli import analyze, commands, experiment, video
+    from ermrl.cli import analyze, commands, dashboard, experiment, video
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    command = f"ermrl {argv[0]}" if argv and not argv[0].startswith("-") else "ermrl"
+    handlers = {**commands.COMMANDS, "experiment": experiment.run_command, "analyze": analyze.run_command,
+                "video": video.run_command, "dashboard": dashboard.run_command}
+    words = [a for a in argv if not a.startswith("-")]
+    command = f"ermrl {words[0]}" if words and words[0] in handlers else "ermrl"
+    debug = "--debug" in argv  # known before parsing, so that parse errors honour it too
     try:
         args = parse(argv)
         command = f"ermrl {args.command}"
         if ermrl.CPU_DEVICES_ERROR:
             raise ConfigError(ermrl.CPU_DEVICES_ERROR)
-        handlers = {**commands.COMMANDS, "experiment": experiment.run_command, "analyze": analyze.run_command,
-                    "video": video.run_command}
         return handlers[args.command](args)
     except ConfigError as e:
+        if debug:
+            traceback.print_exc()
         print(f"{command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -73,6 +132,17 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except BrokenPipeError:  # output piped into a command that stopped reading (e.g. `| head`)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    except Exception as e:  # a bug, or the system failing (disk full, ...): one line unless --debug
+        if debug:
+            traceback.print_exc()
+        if (reason := _write_refused(e)) is not None:
+            print(f"{command}: error: {reason}; free some space or give another output path, then rerun "
+                  "(files are written whole or not at all, and a study keeps every trial told before)", file=sys.stderr)
+            return 1
+        first = str(e).strip().splitlines()[0] if str(e).strip() else ""
+        print(f"{command}: error: unexpected {type(e).__name__}{': ' + first if first else ''} "
+              "(rerun with --debug for the traceback, and please report it)", file=sys.stderr)
         return 1
 
 

@@ -4,6 +4,7 @@ holds, and a saved agent's context and its rhythm."""
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from ermrl.cli import options
@@ -83,7 +84,22 @@ def _episode_options(p) -> None:
 
 
 def run_command(args) -> int:
+    _check_numbers(args)
     return {"hp-map": cmd_hp_map, "probe": cmd_probe, "context": cmd_context, "fft": cmd_fft}[args.analyze_command](args)
+
+
+def _check_numbers(args) -> None:
+    """One-line errors for the analyses' counts, seeds and Φ values, before any file is read."""
+    if getattr(args, "seed", 0) < 0:
+        raise ConfigError(f"--seed must be >= 0, got {args.seed}")
+    for flag in ("max_steps", "units"):
+        value = getattr(args, flag, None)
+        if value is not None and value < 1:
+            raise ConfigError(f"--{flag.replace('_', '-')} must be >= 1, got {value}")
+    for sr, lr, iss in getattr(args, "phi", ()):
+        if not all(math.isfinite(v) and v > 0 for v in (sr, lr, iss)) or lr > 1:
+            raise ConfigError(f"--phi {sr:g} {lr:g} {iss:g}: SR and ISS must be positive and finite and LR (the "
+                              "leak rate) in (0, 1]")
 
 
 def _load(name: str, storage: str | None):
@@ -102,12 +118,14 @@ def _load(name: str, storage: str | None):
 def cmd_hp_map(args) -> int:
     import optuna
 
+    from ermrl import storage
     from ermrl.analysis.hp_map import cross_study_hp_map, points_csv
 
     if args.top < 1:
         raise ConfigError(f"--top must be >= 1, got {args.top}")
     if args.out.is_dir():
         raise ConfigError(f"--out {args.out} is a folder; give a figure path such as {args.out / 'hp_map.png'}")
+    storage.check_file(args.out)  # before any work
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     studies = []
     for name in dict.fromkeys(args.studies):  # each study once, in the given order
@@ -132,7 +150,15 @@ def cmd_probe(args) -> int:
         raise ConfigError(f"--units must be >= 1 and --episodes >= 4, got {args.units} and {args.episodes}")
     if args.out.is_dir():
         raise ConfigError(f"--out {args.out} is a folder; give a figure path such as {args.out / 'probe.png'}")
+    storage.check_file(args.out)  # before any work
     optuna.logging.set_verbosity(optuna.logging.WARNING)
+    from ermrl import envs
+
+    envs.describe(args.env, "host")  # an unknown id or a missing simulator, before any episode
+    if not masking.parse(args.env)[1]:
+        fix = f"use {masking.novel_id(args.env)!r}" if args.env in masking.VELOCITY_DIMS else \
+            "NoVel ids are: " + ", ".join(map(masking.novel_id, masking.VELOCITY_DIMS))
+        raise ConfigError(f"probe needs a NoVel env id whose velocities are deleted, got {args.env!r}; {fix}")
     rows: list[tuple[str, Phi]] = [("default Φ", probe.MEMORY), ("memoryless", probe.MEMORYLESS)]
     rows += [(f"Φ {i + 1}", Phi(*v)) for i, v in enumerate(args.phi)]
     for name in dict.fromkeys(args.study):
@@ -169,10 +195,11 @@ def _agents(source: Path) -> list[Path]:
 
 
 def cmd_context(args) -> int:
+    from ermrl import storage
     from ermrl.analysis.context import context_figure
 
     agents = _agents(args.source)
-    out = args.out or (args.source if args.source.is_dir() else args.source.parent) / "context.png"
+    out = storage.check_file(args.out or (args.source if args.source.is_dir() else args.source.parent) / "context.png")
     path = context_figure(agents[0], out, args.seed, args.units, args.max_steps)
     print(f"wrote {path} ({agents[0]})")
     return 0
@@ -184,6 +211,7 @@ def cmd_fft(args) -> int:
 
     if args.out.is_dir():
         raise ConfigError(f"--out {args.out} is a folder; give a figure path such as {args.out / 'fft.png'}")
+    storage.check_file(args.out)  # before any work
     sources = {str(s): _agents(s) for s in dict.fromkeys(args.sources)}
     table, rows = compare_runs(sources, args.out, args.seed, args.max_steps)
     storage.write_text(args.out.with_suffix(".md"), table)

@@ -32,11 +32,13 @@ def add_parsers(sub, formatter) -> None:
                        description="Evolve Φ = (sr, lr, iss) with Optuna. Each generation (popsize trials × seeds) "
                                    "trains as one population per env. With several --env, a trial's fitness is the "
                                    "mean normalized score over the envs (paper §4.3), from the baselines table. "
-                                   "Rerunning the same command resumes the study.", formatter_class=formatter)
+                                   "Rerunning the same command resumes the study; several processes or machines "
+                                   "may work on one study at once, each with its own --worker-index "
+                                   "(docs/scaling.md).", formatter_class=formatter)
     p.add_argument("--env", action="append", default=None, metavar="ID",
                    help="env id; repeat for a fitness over several envs (default CartPoleNoVel-v1)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per trial; its fitness is their mean")
-    options.add_options(p, "env", "agent", "ppo", "search")
+    options.add_options(p, "env", "agent", "ppo", "search", "workers")
     p.add_argument("--baselines", type=Path, default=None, metavar="TABLE",
                    help="baselines table (default runs/baselines.json over the shipped one); several envs only")
     p.add_argument("--allow-weak-baselines", action="store_true",
@@ -108,16 +110,24 @@ def _study_location(p, required: bool = True) -> None:
     p.add_argument("--out", type=Path, default=None, help="run folder (default runs/STUDY)")
 
 
+def _check_study_name(name: str | None) -> None:
+    if name is not None and not name.strip():
+        raise ConfigError("--study is empty; give the study's name (e.g. cartpole-1res), or leave --study out "
+                          "for `ermrl evolve` to name it")
+
+
 def _run_dir(args) -> Path:
     """The study's folder (--out, else runs/STUDY), checked to be a folder that can be written."""
     from ermrl import storage
 
+    _check_study_name(args.study)
     return storage.check_folder(args.out or Path("runs") / args.study)
 
 
 def _storage(args) -> str:
     from ermrl.evolution.study import default_storage
 
+    _check_study_name(args.study)
     return args.storage or default_storage(_run_dir(args))
 
 
@@ -182,7 +192,15 @@ def cmd_train(args) -> int:
         tensorboard.check_logdir(args.tensorboard)
     if args.seeds < 1:
         raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
+    if args.skip_connection and k == 0:
+        raise ConfigError("--skip-connection feeds the observation beside a reservoir's context, but "
+                          + ("--model lstm" if args.model == "lstm" else "--no-reservoir")
+                          + " has no reservoir and already sees the observation; drop --skip-connection")
     config = options.train_config(args, args.env, k)
+    if config.ppo.model == "lstm":
+        from ermrl.training import recurrent
+
+        recurrent.check(config)
     phi = Phi(*(np.array(_phi_values(n, getattr(args, n), max(k, 1))[: max(k, 1)], np.float32) for n in ("sr", "lr", "iss")))
     _check_phi(phi)
     population = Population.grid(phi, args.seeds, config.ppo.learning_rate, k)
@@ -193,12 +211,13 @@ def cmd_train(args) -> int:
     with TrainingBar(f"{args.env} × {args.seeds} seeds", enabled=not args.quiet) as bar:
         timing = tensorboard.Timing(bar.update)
         results = Trainer(config).run(population, timing)
-    run = storage.write_train_run(out, config, results, label, options.effective(args))
-    if args.save_agents:
-        storage.write_agents(run.folder / storage.AGENTS_DIR, config, results, label)
+    with storage.staged_folder(out) as stage:  # all or nothing: summary.json, which marks it complete, last
+        run = storage.write_train_run(stage, config, results, label, options.effective(args))
+        if args.save_agents:
+            storage.write_agents(run.folder / storage.AGENTS_DIR, config, results, label)
+        learning_curves({label: results.curves()}, f"{results.env_id}: {label}", run.figure)
     if args.tensorboard is not None:
         tensorboard.write_results(args.tensorboard, results, label, timing.elapsed_s)
-    learning_curves({label: results.curves()}, f"{results.env_id}: {label}", run.figure)
     fit = results.fitness()
     for seed, f in zip(results.seeds, fit):
         print(f"seed {seed}: fitness {f:.2f} (mean return of the last 10 training episodes)")
@@ -217,12 +236,12 @@ def cmd_plot(args) -> int:
     from ermrl import storage
     from ermrl.analysis.plots import learning_curves
 
+    storage.check_file(args.out)
     curves = {}
     for run in args.runs:
         if not (run / "curves.csv").is_file():
             raise ConfigError(f"{run} has no curves.csv; give folders written by `ermrl train` or `ermrl test`")
         curves.update(storage.read_curves_csv(run / "curves.csv"))
-    storage.check_folder(args.out.parent)
     title = args.title or storage.run_env_id(args.runs[0]) or ""
     for path in learning_curves(curves, title, args.out, ("png", "svg")):
         print(f"wrote {path}")
@@ -242,6 +261,7 @@ def cmd_evolve(args) -> int:
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.evolve import count, estimate_seconds, evolve, make_trainers
     from ermrl.evolution.study import ATTR, SAMPLERS, make_sampler, open_study
+    from ermrl.evolution.workers import WorkerConfig, worker_seed
     from ermrl.experiments import baseline_runs
 
     if args.sampler not in SAMPLERS:
@@ -255,15 +275,22 @@ def cmd_evolve(args) -> int:
                           trials=args.trials, seeds=args.seeds, sampler=args.sampler, popsize=args.popsize,
                           sampler_seed=args.sampler_seed, envs=env_ids if len(env_ids) > 1 else (),
                           normalization=args.normalization)
+    worker = WorkerConfig(args.batch, args.worker_index, args.heartbeat_interval, args.grace_period)
+    _check_study_name(args.study)
     name = args.study or "+".join(env_ids) + f"-{args.reservoirs}res-{args.timesteps // 1000}k"
     args.study = name
+    if config.normalized:  # a damaged table or a folder given as one fails now, not after the baselines run
+        from ermrl.experiments import baselines as bl
+
+        bl.load_table(storage.check_file(args.baselines or bl.default_table(), "--baselines", "baselines.json"))
     storage_url = _storage(args)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     if config.normalized:
         config = baseline_runs.with_baselines(config, args.baselines, storage_url, name, print,
                                               allow_weak=args.allow_weak_baselines)
-    study = open_study(storage_url, name, make_sampler(args.sampler, config.generation_size, args.sampler_seed),
-                       storage.encode_study_record(config))
+    sampler = make_sampler(args.sampler, config.generation_size, worker_seed(args.sampler_seed, worker.worker_index))
+    study = open_study(storage_url, name, sampler, storage.encode_study_record(config),
+                       heartbeat=(worker.heartbeat_interval, worker.grace_period))
     stored = storage.decode_study_record(study.user_attrs[ATTR])
     config = dataclasses.replace(config, baselines=stored.baselines)  # a resumed study keeps its constants
     done = count(study, optuna.trial.TrialState.COMPLETE)
@@ -271,11 +298,13 @@ def cmd_evolve(args) -> int:
           f"× {args.seeds} seeds × {args.timesteps:,} steps" + (f" on {len(env_ids)} envs" if config.normalized else ""))
     trainers = make_trainers(config)
     if done < args.trials and not args.no_estimate:
-        eta = estimate_seconds(trainers, config, args.trials - done)
-        print(f"estimated time: {eta / 60:.1f} min ({-(-(args.trials - done) // config.generation_size)} generations, "
-              "from one measured iteration per env)")
+        batch = min(worker.batch or config.generation_size, args.trials - done)
+        eta = estimate_seconds(trainers, config, args.trials - done, batch)
+        print(f"estimated time: {eta / 60:.1f} min ({-(-(args.trials - done) // batch)} "
+              + ("generations" if batch == config.generation_size else f"batches of {batch} trials, for this worker "
+                 "alone") + ", from one measured iteration per env)")
     with EvolutionBar(args.trials, config.generation_size, len(env_ids), enabled=not args.quiet) as bar:
-        evolve(study, config, trainers, bar.update)
+        evolve(study, config, trainers, bar.update, worker, lambda line: print(line, flush=True))
     best = study.best_trial
     print(f"best fitness {best.value:.4g} at trial {best.number}: "
           + ", ".join(f"{k} {v:.4g}" for k, v in best.params.items()))
@@ -292,6 +321,8 @@ def cmd_select(args) -> int:
     from ermrl.evolution.selection import select
     from ermrl.evolution.study import ATTR, load_study
 
+    if args.top < 1 or args.seeds < 1:
+        raise ConfigError(f"--top and --seeds must be >= 1, got {args.top} and {args.seeds}")
     study = load_study(_storage(args), args.study)
     config = storage.decode_study_record(study.user_attrs[ATTR])
     progress, close = _bars(args.quiet)
@@ -317,9 +348,13 @@ def cmd_test(args) -> int:
     if args.tensorboard is not None:
         tensorboard.check_logdir(args.tensorboard)
     test = options.test_config(args)
+    if test.env_id is not None:
+        from ermrl import envs
+
+        envs.describe(test.env_id)  # an unknown id or a missing simulator, before opening the study
     study = load_study(_storage(args), args.study)
     storage.decode_study_record(study.user_attrs[ATTR])
-    out = test_dir(_run_dir(args), study.user_attrs[ATTR], test.env_id)
+    out = storage.check_folder(test_dir(_run_dir(args), study.user_attrs[ATTR], test.env_id))
     progress, close = _bars(args.quiet)
     timings = tensorboard.Timings(progress)  # the bars, and each population's update times for time/fps
     try:
@@ -363,8 +398,8 @@ def cmd_baselines(args) -> int:
 
     for env_id in args.env:
         envs.describe(env_id, args.backend)
-    if args.seeds < 1:
-        raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
+    if args.seeds < 1 or args.random_episodes < 1:
+        raise ConfigError(f"--seeds and --random-episodes must be >= 1, got {args.seeds} and {args.random_episodes}")
     lr = options.ppo_config(args).learning_rate
     progress, close = _bars(args.quiet)
     try:

@@ -64,10 +64,19 @@ def _run(args) -> int:
     names = {s.name for s in experiment.studies}
     unknown = [n for n in args.only if n not in names]
     if unknown:
-        raise ConfigError(f"experiment {experiment.name} has no study {unknown[0]!r}; its studies: {', '.join(sorted(names))}")
+        import difflib
+
+        close = difflib.get_close_matches(unknown[0], names, n=1)
+        hint = f"; did you mean {close[0]}?" if close else ""
+        raise ConfigError(f"experiment {experiment.name} has no study {unknown[0]!r}; its studies: "
+                          f"{', '.join(sorted(names))}{hint}")
     folder = storage.check_folder(args.out or runner.experiment_dir(experiment, scale))
     plans = [p for p in runner.plan(experiment, scale, folder, args.backend, args.env_workers)
              if not args.only or p.spec.name in args.only]
+    if any(p.config.normalized for p in plans):  # a damaged table fails now, not after the first studies
+        from ermrl.experiments import baselines
+
+        baselines.load_table(storage.check_file(args.baselines or baselines.default_table(), "--baselines", "baselines.json"))
     for env_id in sorted({e for p in plans for e in p.config.env_ids + tuple(t.env_id for t in p.tests if t.env_id)}):
         envs.describe(env_id, args.backend)  # every env exists and its simulator is installed, before any work
     url = args.storage or runner.default_storage(folder)

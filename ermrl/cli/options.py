@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import difflib
 import functools
 import inspect
 import textwrap
@@ -82,6 +83,7 @@ def _groups() -> dict[str, list[Option]]:
     from ermrl.agent import AgentConfig
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.search_space import SearchSpace
+    from ermrl.evolution.workers import WorkerConfig
     from ermrl.experiments.evaluation import TestConfig
     from ermrl.ppo.config import PPOConfig
     from ermrl.reservoir import ReservoirSpec
@@ -118,6 +120,10 @@ def _groups() -> dict[str, list[Option]]:
                    Option("--fixed-iss", SearchSpace, "fixed_iss", kwargs={"type": float}),
                    Option("--normalization", EvolveConfig, "normalization",
                           kwargs={"choices": ["episodic", "reference"]}), *space],
+        "workers": [Option("--batch", WorkerConfig, "batch", kwargs={"type": int}),
+                    Option("--worker-index", WorkerConfig, "worker_index", kwargs={"type": int}),
+                    Option("--heartbeat-interval", WorkerConfig, "heartbeat_interval", kwargs={"type": int}),
+                    Option("--grace-period", WorkerConfig, "grace_period", kwargs={"type": int})],
         "test": [Option("--seeds", TestConfig, "seeds", kwargs={"type": int}),
                  Option("--timesteps", TestConfig, "timesteps", kwargs={"type": int}),
                  Option("--ermrl-lr", TestConfig, "ermrl_lrs", kwargs={"type": float, "nargs": "+", "default": None}),
@@ -205,7 +211,7 @@ def test_config(args):
 
 def effective(args) -> dict:
     """Every option's final value (config file and flags applied), JSON-ready, for the run's record."""
-    skip = {"command", "func", "config", "experiment_command"}
+    skip = {"command", "func", "config", "experiment_command", "debug"}
     return {k: (str(v) if isinstance(v, Path) else v) for k, v in sorted(vars(args).items()) if k not in skip}
 
 
@@ -214,9 +220,16 @@ def effective(args) -> dict:
 
 def load_config_file(path: Path) -> dict:
     """The table of a TOML or YAML config file; ConfigError (one line) when it cannot be read."""
+    if path.is_dir():
+        raise ConfigError(f"config file {path} is a folder; give the path of a .toml or .yaml file")
     if not path.is_file():
         raise ConfigError(f"config file {path} does not exist; give the path of a .toml or .yaml file")
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"config file {path} is not UTF-8 text (byte {e.start}); save it as UTF-8") from None
+    except OSError as e:
+        raise ConfigError(f"cannot read config file {path} ({e.strerror}); give a file you can read") from None
     try:
         if path.suffix == ".toml":
             import tomllib
@@ -240,37 +253,60 @@ def load_config_file(path: Path) -> dict:
 
 def apply_config_file(parser: argparse.ArgumentParser, path: Path) -> None:
     """Sets the values of ``path`` as ``parser``'s defaults, after checking each key and type."""
-    actions = {a.dest: a for a in parser._actions if a.option_strings and a.dest not in ("help", "config")}
+    actions = {a.dest: a for a in parser._actions
+               if a.option_strings and a.dest not in ("help", "config", "debug", "version")}
     values = {}
     for key, value in load_config_file(path).items():
         dest = str(key).lstrip("-").replace("-", "_")
         if dest not in actions:
-            close = sorted(d.replace("_", "-") for d in actions)
-            raise ConfigError(f"config file {path}: unknown option {key!r}; options here: {', '.join(close)}")
+            names = sorted(d.replace("_", "-") for d in actions)
+            close = difflib.get_close_matches(dest.replace("_", "-"), names, n=1, cutoff=0.75)
+            hint = f"did you mean {close[0]!r}?" if close else f"options here: {', '.join(names)}"
+            raise ConfigError(f"config file {path}: unknown option {key!r} for `{parser.prog}`; {hint}")
         values[dest] = _convert(actions[dest], value, path, key)
     parser.set_defaults(**values)
 
 
 def _convert(action: argparse.Action, value, path: Path, key: str):
+    """A config file's ``value`` for ``action``, checked and converted as argparse would the flag's words."""
     where = f"config file {path}: {key}"
     if isinstance(action, (argparse._StoreTrueAction, argparse.BooleanOptionalAction)):
         if not isinstance(value, bool):
             raise ConfigError(f"{where} must be true or false, got {value!r}")
         return value
-    many = action.nargs in ("+", "*") or isinstance(action, argparse._AppendAction)
-    items = value if isinstance(value, list) and many else [value]
-    if isinstance(value, list) and not many:
+    if isinstance(action, argparse._AppendAction):  # repeatable: a list of occurrences, or one
+        one = not isinstance(value, list) or (isinstance(action.nargs, int) and not any(isinstance(v, list) for v in value))
+        return [_values(action, v, where) for v in ([value] if one else value)]
+    return _values(action, value, where)
+
+
+def _values(action: argparse.Action, value, where: str):
+    """One occurrence of a flag: a scalar, or a list for nargs '+', '*' or N."""
+    n = action.nargs
+    if n in ("+", "*") or isinstance(n, int):
+        items = value if isinstance(value, list) else [value]
+        if isinstance(n, int) and len(items) != n:
+            raise ConfigError(f"{where} takes {n} values, got {value!r}")
+        if n == "+" and not items:
+            raise ConfigError(f"{where} takes at least one value, got an empty list")
+        return [_scalar(action, item, where) for item in items]
+    if isinstance(value, list):
         raise ConfigError(f"{where} takes one value, got a list {value!r}")
-    out = []
-    for item in items:
-        if action.type is int and isinstance(item, float):
-            raise ConfigError(f"{where} must be an integer, got {item!r}")
-        if action.type is not None and not (isinstance(item, str) and item == "auto"):
-            try:
-                item = action.type(item if not isinstance(item, bool) else "bool")
-            except (TypeError, ValueError, argparse.ArgumentTypeError):
-                raise ConfigError(f"{where} has the wrong type: {item!r}") from None
-        if action.choices is not None and item not in action.choices:
-            raise ConfigError(f"{where} must be one of {', '.join(map(str, action.choices))}, got {item!r}")
-        out.append(item)
-    return out if many else out[0]
+    return _scalar(action, value, where)
+
+
+def _scalar(action: argparse.Action, item, where: str):
+    need = {int: "an integer", float: "a number"}.get(action.type)
+    if action.type is int and isinstance(item, float):
+        raise ConfigError(f"{where} must be an integer, got {item!r}")
+    if need and isinstance(item, (bool, list, dict)) or isinstance(item, (list, dict)):
+        raise ConfigError(f"{where} has the wrong type: {item!r}; give {need or 'one value'}")
+    if action.type is not None and not (isinstance(item, str) and item == "auto"):
+        try:
+            item = action.type(item)
+        except (TypeError, ValueError, argparse.ArgumentTypeError) as e:
+            fix = f"give {need}" if need else str(e) if isinstance(e, argparse.ArgumentTypeError) else "see --help"
+            raise ConfigError(f"{where} has the wrong type: {item!r}; {fix}") from None
+    if action.choices is not None and item not in action.choices:
+        raise ConfigError(f"{where} must be one of {', '.join(map(str, action.choices))}, got {item!r}")
+    return item

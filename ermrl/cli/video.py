@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from ermrl.errors import ConfigError
@@ -33,19 +34,42 @@ def run_command(args) -> int:
 
     if args.agent is None and args.run is None:
         raise ConfigError("give a run folder (ermrl video RUN) or an agent file (--agent FILE)")
+    _check_numbers(args)
+    if args.run is not None and args.run.is_file():
+        raise ConfigError(f"{args.run} is a file, not a run folder; give the folder, or the agent file as --agent "
+                          f"{args.run}")
     if args.run is not None and not args.run.is_dir():
         raise ConfigError(f"run folder {args.run} does not exist; give a folder written by `ermrl train` or "
                           "`ermrl test`")
     agent = load_agent(args.agent if args.agent is not None else args.run)
+    from ermrl.envs.host_backend import check_mujoco_gl
+
+    check_mujoco_gl(agent.env.base_id)
     folder = args.run if args.run is not None else agent.path.parent
     out = args.out or folder / "videos" / f"{_name(agent.path, folder)}-env-seed{args.seed}.mp4"
-    storage.check_folder(out.parent)
+    storage.check_file(out)
     video = write_video(agent, out, args.episodes, args.seed, args.max_steps, not args.stochastic, args.fps)
     returns = ", ".join(f"{r:.1f}" for r in video.returns)
     print(f"agent {agent.path} ({agent.env_id}, seed {agent.seed})")
     print(f"wrote {video.path}: {video.frames} frames at {video.fps:g} fps; {len(video.returns)} episode(s), "
           f"returns {returns}, lengths {', '.join(map(str, video.lengths))}")
     return 0
+
+
+def _check_numbers(args) -> None:
+    """One-line errors for the counts, the seed, the frame rate and the file type, before loading anything."""
+    from ermrl.analysis.video import FORMATS
+
+    if args.episodes < 1:
+        raise ConfigError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.max_steps is not None and args.max_steps < 1:
+        raise ConfigError(f"--max-steps must be >= 1, got {args.max_steps}")
+    if args.seed < 0:
+        raise ConfigError(f"--seed must be >= 0, got {args.seed}")
+    if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
+        raise ConfigError(f"--fps must be a positive number, got {args.fps}; or leave it out for the env's rate")
+    if args.out is not None and args.out.suffix.lower() not in FORMATS:
+        raise ConfigError(f"video file {args.out} must end in .mp4 or .gif")
 
 
 def _name(path: Path, folder: Path) -> str:

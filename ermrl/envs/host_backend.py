@@ -34,6 +34,19 @@ def extra_for(base_id: str) -> str | None:
     return next((extra for prefix, extra in EXTRAS.items() if entry.startswith(prefix)), None)
 
 
+MUJOCO_GL_VALUES = ("egl", "osmesa", "glfw", "glx", "enable", "enabled", "on", "true", "1", "",
+                    "disable", "disabled", "off", "false", "0")
+"""What MuJoCo accepts for MUJOCO_GL on Linux; any other value makes ``import mujoco`` raise."""
+
+
+def check_mujoco_gl(base_id: str) -> None:
+    """A one-line ConfigError when ``base_id`` is a MuJoCo env and MUJOCO_GL holds a value MuJoCo refuses."""
+    value = os.environ.get("MUJOCO_GL")
+    if value is not None and value.lower().strip() not in MUJOCO_GL_VALUES and extra_for(base_id) == "mujoco":
+        raise ConfigError(f"MUJOCO_GL={value!r} is not a renderer MuJoCo knows; set it to egl or osmesa (no screen) "
+                          "or glfw, or unset it")
+
+
 def known(base_id: str) -> bool:
     """Whether Gymnasium's registry has ``base_id``."""
     import gymnasium as gym
@@ -45,6 +58,7 @@ def describe(env_id: str, base_id: str, deleted: tuple[int, ...]) -> EnvInfo:
     """EnvInfo of a Gymnasium env, built by making one instance. Raises ConfigError with the fix."""
     import gymnasium as gym
 
+    check_mujoco_gl(base_id)
     try:
         env = make_gymnasium(base_id)
     except gym.error.DependencyNotInstalled as error:

@@ -1,19 +1,26 @@
 """Optuna storage and studies: opening them with one-line errors, and what ermrl keeps in them.
 
-The default storage is an embedded SQLite file in the run folder. Any Optuna RDB URL works, and so does a
-journal file (a path ending in ``.log`` or ``.jsonl``, or ``journal:PATH``).
+The default storage is an embedded SQLite file in the run folder. Any Optuna RDB URL works (``postgresql://``
+through psycopg, the ``workers`` extra, for many workers on one study: docs/scaling.md), and so does a journal
+file (a path ending in ``.log`` or ``.jsonl``, or ``journal:PATH``).
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
+import random
+import time
+import warnings
 from pathlib import Path
 
 import optuna
 
 from ermrl.errors import ConfigError
+from ermrl.evolution.heartbeat import GRACE_PERIOD_S, INTERVAL_S
 
 SAMPLERS = ("cmaes", "random", "tpe")
+SCHEMA_RETRIES = 5
 ATTR = "ermrl"
 """The study user attribute that holds the evolution's config."""
 
@@ -31,25 +38,63 @@ def storage_file(url: str) -> Path | None:
     return None
 
 
-def make_storage(url: str) -> optuna.storages.BaseStorage:
-    """An Optuna storage for ``url``; raises ConfigError (one line) if it cannot be opened."""
+def make_storage(url: str, heartbeat: tuple[int, int] | None = None) -> optuna.storages.BaseStorage:
+    """An Optuna storage for ``url``; raises ConfigError (one line) if it cannot be opened. ``heartbeat``:
+    (interval, grace period) in seconds, Optuna's heartbeats of an RDB storage (see ``heartbeat.py``); journal
+    files have none in Optuna, and ermrl's workers beat there through a trial attribute instead."""
     journal = url.startswith("journal:") or url.endswith((".log", ".jsonl"))
     try:
         if journal:
             path = storage_file(url)
             path.parent.mkdir(parents=True, exist_ok=True)
+            from ermrl.atomic import repair_journal
+
+            repair_journal(path)  # a torn last line (a writer killed mid-append, a full disk) would poison the next append
             return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(path)))
         if url.startswith("sqlite:///"):
             Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
-        return optuna.storages.RDBStorage(url, engine_kwargs=_engine_kwargs(url))
+        kwargs = {}
+        if heartbeat is not None:
+            kwargs = {"heartbeat_interval": heartbeat[0], "grace_period": heartbeat[1]}
+        return _rdb_storage(_driver_url(url), _engine_kwargs(url), kwargs)
+    except ConfigError:
+        raise
     except Exception as e:  # sqlalchemy raises many types; all mean the URL is unusable
         reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise ConfigError(f"cannot open storage {url!r} ({reason}); use sqlite:///PATH.db, a journal file PATH.log, "
                           "or a reachable database URL") from None
 
 
+def _rdb_storage(url: str, engine_kwargs: dict, kwargs: dict) -> optuna.storages.RDBStorage:
+    """Optuna's RDB storage; retried when workers started at once race to create the schema of a new database
+    (the losers' CREATE TABLE or CREATE TYPE fails with a duplicate)."""
+    import sqlalchemy.exc
+
+    for attempt in range(SCHEMA_RETRIES):
+        try:
+            with warnings.catch_warnings():  # heartbeat_interval is an ExperimentalWarning in Optuna
+                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                return optuna.storages.RDBStorage(url, engine_kwargs=engine_kwargs, **kwargs)
+        except (sqlalchemy.exc.IntegrityError, sqlalchemy.exc.ProgrammingError):
+            if attempt == SCHEMA_RETRIES - 1:
+                raise
+            time.sleep(0.2 + random.random())
+
+
+def _driver_url(url: str) -> str:
+    """``url`` with PostgreSQL's driver named: SQLAlchemy's default for ``postgresql://`` is psycopg2, which the
+    ``workers`` extra does not install; psycopg (3) is the one it installs. ConfigError when it is missing."""
+    scheme, sep, rest = url.partition("://")
+    if scheme not in ("postgresql", "postgres", "postgresql+psycopg") or not sep:
+        return url
+    if importlib.util.find_spec("psycopg") is None:
+        raise ConfigError(f"cannot open storage {url!r}: the PostgreSQL driver is not installed; run "
+                          "pip install 'ermrl[workers]'")
+    return f"postgresql+psycopg://{rest}"
+
+
 def _engine_kwargs(url: str) -> dict:
-    if url.startswith(("postgresql", "mysql")):
+    if url.startswith(("postgres", "mysql")):
         return {"connect_args": {"connect_timeout": 5}}
     return {}
 
@@ -65,9 +110,12 @@ def make_sampler(name: str, popsize: int, seed: int | None) -> optuna.samplers.B
     raise ConfigError(f"unknown sampler {name!r}; choose one of {', '.join(SAMPLERS)}")
 
 
-def open_study(storage_url: str, name: str, sampler, record: dict | None) -> optuna.Study:
-    """Creates or resumes study ``name``. With ``record``, checks that a resumed study has the same config."""
-    storage = make_storage(storage_url)
+def open_study(storage_url: str, name: str, sampler, record: dict | None,
+               heartbeat: tuple[int, int] | None = (INTERVAL_S, GRACE_PERIOD_S)) -> optuna.Study:
+    """Creates or resumes study ``name``. With ``record``, checks that a resumed study has the same config.
+    ``heartbeat``: (interval, grace period) in seconds of Optuna's heartbeats on an RDB storage, which every
+    worker of a study must have (see ``heartbeat.py``)."""
+    storage = make_storage(storage_url, heartbeat)
     try:
         study = optuna.create_study(storage=storage, study_name=name, sampler=sampler, direction="maximize",
                                     load_if_exists=True)
@@ -77,7 +125,11 @@ def open_study(storage_url: str, name: str, sampler, record: dict | None) -> opt
         stored = study.user_attrs.get(ATTR)
         if stored is None:
             study.set_user_attr(ATTR, record)
-        elif _comparable(_current(stored)) != _comparable(record):
+            stored = study.user_attrs[ATTR]  # a worker started at the same moment may have written its own
+            differs = _comparable(stored) != _comparable(record)
+        else:
+            differs = _comparable(_current(stored)) != _comparable(record)
+        if differs:
             raise ConfigError(f"study {name!r} already exists with another config; rerun with the same flags to "
                               "resume it, or pick a new --study name")
     return study
@@ -110,7 +162,8 @@ def _current(record: dict) -> dict:
 def _comparable(record: dict) -> str:
     """The config without the fields that may change between a run and its resumption: the trial target, the
     baselines (a resumed study keeps the constants it started with) and the number of env worker processes
-    (results do not depend on it)."""
+    (results do not depend on it). A worker's own settings (``workers.WorkerConfig``: batch, index, heartbeats)
+    are not in the record at all."""
     keep = {k: v for k, v in record.items() if k not in ("trials", "baselines")}
     if isinstance(keep.get("train"), dict):
         keep["train"] = {k: v for k, v in keep["train"].items() if k != "env_workers"}

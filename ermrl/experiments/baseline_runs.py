@@ -22,6 +22,11 @@ def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path
     """Each env's Baseline at this budget; missing random or PPO entries are computed and saved first."""
     table_path = table_path or bl.default_table()
     table = bl.load_table(table_path)
+    if recompute or any(table.random(e) is None or table.ppo(e, timesteps, seeds, learning_rate) is None
+                        for e in env_ids):
+        from ermrl.storage import check_file
+
+        check_file(table_path, "baselines table", "baselines.json")  # before computing what it will store
     changed = False
     for env_id in env_ids:
         if recompute or table.random(env_id) is None:

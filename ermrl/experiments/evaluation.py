@@ -67,6 +67,12 @@ class TestConfig:
         for lr in self.ermrl_lrs + ((self.ppo_lr,) if self.ppo_lr is not None else ()):
             if not 0 < lr < 1:
                 raise ConfigError(f"learning rate {lr} is outside (0, 1); the paper uses 3e-4 or 1e-4")
+        if self.trial is not None and self.trial < 0:
+            raise ConfigError(f"--trial must be a trial number >= 0, got {self.trial}")
+        if self.auc_steps is not None and self.auc_steps < 1:
+            raise ConfigError(f"--auc-steps must be >= 1, got {self.auc_steps}")
+        if self.env_id is not None and not self.env_id.strip():
+            raise ConfigError("--env is empty; give an env id, or leave --env out to test on the evolution's env")
 
 
 def test_dir(run_dir: Path, record: dict, env_id: str | None) -> Path:
@@ -112,7 +118,8 @@ def _phi_text(phi: Phi, k: int, trial: int) -> str:
 def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
                    progress: Callable[[str], Callable] | None = None, save_agents: bool = True) -> list[dict]:
     """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
-    into ``out``, and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
+    into ``out`` (checked before any training, written all at once at the end: :func:`ermrl.storage.staged_folder`),
+    and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
     ermrl, ermrl-lr-LR with several learning rates, ppo, ppo-full-observation, ppo-lstm). Returns one summary row
     per model (see :func:`summarize`), each ER-MRL row with its probability of improvement over every PPO baseline
     (PPO-LSTM included)."""
@@ -120,6 +127,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     trial, phi, how = chosen_trial(study, config, test.trial)
     env_id = test.env_id or config.env_ids[0]
     envs.describe(env_id, config.train.backend)  # an unknown id fails before any training
+    storage.check_folder(out)
     base = dataclasses.replace(config.train_for(env_id), total_timesteps=test.timesteps)
     k = config.space.reservoirs
     seeds = list(range(FIRST_TEST_SEED, FIRST_TEST_SEED + test.seeds))
@@ -146,7 +154,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
         jobs.append(("PPO-LSTM", lstm, Population.grid(no_phi, seeds, ppo_lr, 0), ["PPO-LSTM (same observation)"]))
         folders["PPO-LSTM (same observation)"] = "ppo-lstm"
 
-    curves, seed_map, rows = {}, {}, []
+    curves, seed_map, rows, agents = {}, {}, [], []
     for kind, train_config, population, model_labels in jobs:
         fn = progress(model_labels[0] if len(model_labels) == 1 else kind) if progress else None
         results = Trainer(train_config).run(population, fn)
@@ -156,22 +164,25 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
             seed_map[label] = part.seeds
             rows.append(summarize(label, kind, part, test.auc_steps))
             if save_agents:
-                storage.write_agents(out / storage.AGENTS_DIR / folders[label], train_config, part, label)
+                agents.append((folders[label], train_config, part, label))
     _add_improvement(rows)
     evolved_on = list(config.env_ids)
     for r in rows:
         r.update(evolved_on=evolved_on, phi_trial=trial.number, phi_choice=how)
 
-    storage.write_curves_csv(out / "curves.csv", curves, seed_map)
-    storage.write_test_summary(out, rows)
-    storage.write_json(out / "test_config.json", {**dataclasses.asdict(test), "phi_trial": trial.number,
-                                                  "phi_choice": how, "evolved_on": evolved_on})
     from ermrl.analysis.plots import learning_curves
 
     title = f"{env_id}: test phase, {test.seeds} new seeds"
     if evolved_on != [env_id]:
         title += f"\nΦ* evolved on {', '.join(evolved_on)}"
-    learning_curves(curves, title, out / "test_phase", ("png", "svg"))
+    with storage.staged_folder(out) as stage:  # all or nothing: summary.json, which marks it complete, last
+        for folder, train_config, part, label in agents:
+            storage.write_agents(stage / storage.AGENTS_DIR / folder, train_config, part, label)
+        storage.write_curves_csv(stage / "curves.csv", curves, seed_map)
+        storage.write_json(stage / "test_config.json", {**dataclasses.asdict(test), "phi_trial": trial.number,
+                                                        "phi_choice": how, "evolved_on": evolved_on})
+        learning_curves(curves, title, stage / "test_phase", ("png", "svg"))
+        storage.write_test_summary(stage, rows)
     return rows
 
 

@@ -9,7 +9,9 @@ critic each have their own LSTM on the raw observation, followed by the same hea
 The MLPs are :class:`~ermrl.ppo.networks.MLP` with SB3's orthogonal gains, as sb3-contrib builds its
 ``mlp_extractor`` on the LSTM output. The LSTMs keep torch's ``nn.LSTM`` initialization, since sb3-contrib's
 orthogonal init reaches only linear layers: every weight and both biases U(−1/√H, 1/√H). Gates are in torch's
-order (input, forget, cell, output); our one bias is torch's ``b_ih + b_hh``, drawn as that sum.
+order (input, forget, cell, output). Both of torch's biases are kept as parameters (``bias_ih``, ``bias_hh``):
+the gates see their sum, but each gets the sum's gradient, so under Adam the sum moves twice as far per step as
+one bias would, and the global-norm clipping counts that gradient twice; one summed bias learned differently.
 
 A state is zeroed before a step that starts an episode, ``(1 − episode_start) · state``, as sb3-contrib's
 ``_process_sequence`` does; so during the rollout the state is carried across steps and reset at episode starts,
@@ -59,16 +61,16 @@ class Sequences(NamedTuple):
 
 def lstm_init(key: jax.Array, in_dim: int, hidden: int) -> dict:
     """torch ``nn.LSTM``'s default init: U(−k, k), k = 1/√hidden, for the input and recurrent weights and for
-    both of torch's biases (summed here). Kernels are (in, 4H) and (H, 4H), gates in torch's order i, f, g, o."""
+    both of torch's biases, (4H,) each. Kernels are (in, 4H) and (H, 4H), gates in torch's order i, f, g, o."""
     k = 1.0 / jnp.sqrt(jnp.float32(hidden))
     kx, kh, kb1, kb2 = jax.random.split(key, 4)
     u = lambda key, shape: jax.random.uniform(key, shape, jnp.float32, -k, k)
     return {"kernel_x": u(kx, (in_dim, 4 * hidden)), "kernel_h": u(kh, (hidden, 4 * hidden)),
-            "bias": u(kb1, (4 * hidden,)) + u(kb2, (4 * hidden,))}
+            "bias_ih": u(kb1, (4 * hidden,)), "bias_hh": u(kb2, (4 * hidden,))}
 
 
 def lstm_cell(params: dict, state: LSTMState, gates_x: jax.Array) -> LSTMState:
-    """One LSTM step from the input's gate contribution ``gates_x`` = x @ kernel_x + bias, (..., 4H)."""
+    """One LSTM step from the input's gate contribution ``gates_x`` = :func:`input_gates`, (..., 4H)."""
     gates = gates_x + state.h @ params["kernel_h"]
     i, f, g, o = jnp.split(gates, 4, axis=-1)
     c = jax.nn.sigmoid(f) * state.c + jax.nn.sigmoid(i) * jnp.tanh(g)
@@ -76,8 +78,9 @@ def lstm_cell(params: dict, state: LSTMState, gates_x: jax.Array) -> LSTMState:
 
 
 def input_gates(params: dict, x: jax.Array) -> jax.Array:
-    """x @ kernel_x + bias for any leading axes (done for a whole sequence at once, outside the time loop)."""
-    return x @ params["kernel_x"] + params["bias"]
+    """x @ kernel_x + bias_ih + bias_hh for any leading axes (done for a whole sequence at once, outside the time
+    loop)."""
+    return x @ params["kernel_x"] + (params["bias_ih"] + params["bias_hh"])
 
 
 def reset(state, episode_start: jax.Array):
@@ -108,8 +111,8 @@ class RecurrentActorCritic(ActorCritic):
     """Separate actor and critic LSTMs, then :class:`ActorCritic`'s MLP heads and action distribution.
 
     Params are a :class:`PolicyParams` whose ``actor`` and ``critic`` are ``{"lstm": {kernel_x, kernel_h,
-    bias}, "mlp": Flax MLP params}``. :meth:`step` acts during the rollout; :meth:`head` and :meth:`value` take
-    :class:`Sequences` and return one row per step, (N·T, ...), in sequence-major order."""
+    bias_ih, bias_hh}, "mlp": Flax MLP params}``. :meth:`step` acts during the rollout; :meth:`head` and
+    :meth:`value` take :class:`Sequences` and return one row per step, (N·T, ...), in sequence-major order."""
 
     def __init__(self, action: ActionSpace, hidden: Sequence[int], lstm_hidden: int, log_std_init: float = 0.0):
         super().__init__(action, hidden, log_std_init)

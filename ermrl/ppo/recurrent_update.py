@@ -78,7 +78,7 @@ def update(learner: LearnerState, batch: SequenceBatch, key: jax.Array, net: Rec
     """Runs the epochs over ``batch``. Returns (learner, metrics averaged over minibatches).
 
     ``orders`` (n_epochs, n_windows, lstm_seq_len) int32 gives each epoch's windows instead of :func:`windows`
-    (the test of minibatch contents uses it)."""
+    (the tests use it: minibatch contents, and RecurrentPPO's order in tests/test_parity_recurrent.py)."""
     optimizer = make_optimizer(config)
     grad_fn = jax.value_and_grad(ppo_loss, has_aux=True)
     per_minibatch = config.batch_size // config.lstm_seq_len

@@ -40,7 +40,8 @@ class Policies:
     actor: dict
     """Flax params of the actor MLP, {"params": {"Dense_i": {"kernel": (A, in, out), "bias": (A, out)}}};
     its output is the logits (Discrete) or the Gaussian means (Box). PPO-LSTM (``ppo.model = "lstm"``):
-    {"lstm": {"kernel_x", "kernel_h", "bias"}, "mlp": those MLP params} (see :mod:`ermrl.ppo.recurrent`)."""
+    {"lstm": {"kernel_x", "kernel_h", "bias_ih", "bias_hh"}, "mlp": those MLP params} (see
+    :mod:`ermrl.ppo.recurrent`)."""
     critic: dict
     """The same for the critic (its last layer has one output, the value)."""
     log_std: np.ndarray | None

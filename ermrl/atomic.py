@@ -1,0 +1,211 @@
+"""Crash-safe writing: a file is written whole or not at all (:func:`atomic_path`), a folder of results appears
+complete or not at all (:func:`staged_folder`), a journal file's torn last line is cut (:func:`repair_journal`),
+and an output path is checked before any work (:func:`check_folder`, :func:`check_file`). The file formats that
+use them live in :mod:`ermrl.storage`, which re-exports these. docs/reliability.md has the faults tried.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import glob
+import json
+import os
+import shutil
+import socket
+import tempfile
+from pathlib import Path
+
+from ermrl.errors import ConfigError
+
+
+@contextlib.contextmanager
+def atomic_path(path: Path | str):
+    """Yields a temporary path beside ``path``; renames it over ``path`` when the block ends without error."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the final file gets the usual permissions
+    try:
+        yield Path(tmp)
+        _fsync(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _fsync(path: str) -> None:
+    """Flushes a closed file's data to disk, so that the rename never publishes an empty file after a power cut."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def staged_folder(folder: Path | str, marker: str = "summary.json"):
+    """Yields a hidden sibling folder, ``.NAME.partial-HOST-PID``, to write ``folder``'s files into; when the block
+    ends without error they take ``folder``'s place, so that a crash (even kill -9) leaves ``folder`` as it was or
+    complete, never half-written.
+
+    A missing or empty ``folder`` is replaced by renaming the staged folder (one atomic step). Into an existing
+    one, ``marker`` (the file readers take to mean "complete") is removed first, then every staged file is renamed
+    over its namesake, ``marker`` last; files the stage lacks are removed from its subfolders (old agents) but kept
+    at the top (other commands' outputs, such as analyses). A staging folder left by a killed process is removed
+    by the next writer of ``folder`` on the same host."""
+    folder = Path(os.path.realpath(folder))
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    prefix = f".{folder.name}.partial-{socket.gethostname()}-"
+    for old in folder.parent.glob(glob.escape(prefix) + "*"):
+        pid = old.name.removeprefix(prefix)
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(old, ignore_errors=True)
+    stage = folder.parent / f"{prefix}{os.getpid()}"
+    shutil.rmtree(stage, ignore_errors=True)
+    stage.mkdir()
+    try:
+        yield stage
+        _publish(stage, folder, marker)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def _publish(stage: Path, folder: Path, marker: str) -> None:
+    """Moves ``stage``'s files into ``folder`` (see :func:`staged_folder`)."""
+    try:
+        os.rename(stage, folder)  # replaces a missing or empty folder
+        return
+    except OSError as e:
+        if e.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+            raise
+    files = sorted((p.relative_to(stage) for p in stage.rglob("*") if not p.is_dir()), key=lambda p: p == Path(marker))
+    with contextlib.suppress(FileNotFoundError):
+        (folder / marker).unlink()
+    for sub in {p.parts[0] for p in files if len(p.parts) > 1}:
+        for old in (folder / sub).rglob("*") if (folder / sub).is_dir() else ():
+            if not old.is_dir() and not (stage / old.relative_to(folder)).exists():
+                old.unlink()
+    for p in files:
+        (folder / p).parent.mkdir(parents=True, exist_ok=True)
+        os.replace(stage / p, folder / p)
+
+
+def repair_journal(path: Path | str) -> int:
+    """Cuts a torn last line from the Optuna journal file ``path``: one without its newline, which a writer that
+    died mid-append (or a full disk) leaves. Optuna reads past it, but its next append would glue onto it and
+    make the whole journal unreadable. Done under the journal's own lock, so a live writer is never cut short,
+    and only after a whole line that is a journal record, so that a file that is no journal is never touched.
+    Returns the number of bytes cut (0 for a sound, missing or foreign file)."""
+    from optuna.storages.journal import JournalFileSymlinkLock
+
+    path = Path(path)
+    if not _torn(path):
+        return 0
+    lock = JournalFileSymlinkLock(str(path))  # what JournalFileBackend appends under by default
+    lock.acquire()
+    try:
+        if not _torn(path):
+            return 0
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            end = _after_last_newline(f, size)  # where the torn line starts
+            if end == 0:
+                return 0
+            start = _after_last_newline(f, end - 1)  # the last whole line is [start, end)
+            f.seek(start)
+            last = f.read(end - start)
+        try:
+            record = json.loads(last)
+        except ValueError:
+            record = None
+        if not (isinstance(record, dict) and "op_code" in record):
+            return 0  # not a journal (or its first record is torn): left as it is
+        os.truncate(path, end)
+        return size - end
+    finally:
+        lock.release()
+
+
+def _after_last_newline(f, end: int) -> int:
+    """The offset just after the last newline before offset ``end`` of the binary file ``f`` (0: none)."""
+    while end > 0:
+        start = max(0, end - 65536)
+        f.seek(start)
+        nl = f.read(end - start).rfind(b"\n")
+        if nl >= 0:
+            return start + nl + 1
+        end = start
+    return 0
+
+
+def _torn(path: Path) -> bool:
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            if f.tell() == 0:
+                return False
+            f.seek(-1, os.SEEK_END)
+            return f.read(1) != b"\n"
+    except FileNotFoundError:
+        return False
+
+
+def check_folder(path: Path | str, flag: str = "--out") -> Path:
+    """``path`` if a folder is or can be made there: it is a folder, or its nearest existing parent is a writable
+    folder. Otherwise ConfigError (one line, naming ``flag``), so that a bad output path fails before any training
+    instead of losing the results at the end."""
+    path = Path(path)
+    for p in (path, *path.parents):
+        if not p.exists():
+            continue
+        if not p.is_dir():
+            where = f"{flag} {p}" if p == path else f"{flag} {path}: its parent {p}"
+            raise ConfigError(f"{where} is a file, not a folder; give a folder path (it is created if missing)")
+        if (reason := _cannot_write(p)) is not None:
+            raise ConfigError(f"{flag} {path}: cannot write in {p} ({reason}); give a folder you can write")
+        return path
+    return path
+
+
+def _cannot_write(folder: Path) -> str | None:
+    """Why nothing can be created in ``folder``, else None. Tried for real (an empty folder made and removed):
+    permission bits do not bind root, and a read-only mount or a pseudo file system refuses anyone."""
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".ermrl-check-", dir=folder))
+    except OSError as e:
+        reason = e.strerror or type(e).__name__
+        return reason[0].lower() + reason[1:]
+    return None
+
+
+def check_file(path: Path | str, flag: str = "--out", example: str = "NAME.png") -> Path:
+    """``path`` if a file can be written there: it is not a folder, and its nearest existing parent is a writable
+    folder. Otherwise ConfigError (one line, naming ``flag``; a folder gets the hint ``path/example``), before any
+    work."""
+    path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"{flag} {path} is a folder; give a file path such as {path / example}")
+    for p in path.parents:
+        if not p.exists():
+            continue
+        if not p.is_dir():
+            raise ConfigError(f"{flag} {path}: its parent {p} is a file, not a folder; give a path in a folder")
+        if (reason := _cannot_write(p)) is not None:
+            raise ConfigError(f"{flag} {path}: cannot write in {p} ({reason}); give a folder you can write")
+        break
+    return path

@@ -1,0 +1,264 @@
+"""One worker of a study: how it claims trials, waits for them, and gives them back (docs/scaling.md).
+
+Any number of ``ermrl evolve`` processes, on one machine or many, may work on one study in a shared storage
+(PostgreSQL for many machines). Each one loops: fail the trials of workers that are gone (``heartbeat``), claim
+at most ``batch`` free slots of the shared generation (``generations``), train them as one population, tell
+them. It asks no more trials than the study still needs (``trials`` minus those completed or running), and
+waits, polling, while the generation is full or the last trials run elsewhere, until ``trials`` completed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import signal
+import threading
+import time
+import warnings
+from typing import Callable
+
+import numpy as np
+import optuna
+from optuna.exceptions import UpdateFinishedTrialError
+from optuna.trial import FrozenTrial, TrialState
+
+from ermrl.agent import Phi
+from ermrl.errors import ConfigError
+from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.generations import ATTR, CMA_GENERATION, FULL, Ledger
+from ermrl.evolution.heartbeat import (GRACE_PERIOD_S, INTERRUPTED, INTERVAL_S, WORKER_ATTR, Heartbeat, WorkerId,
+                                       fail_lost, fail_trial, optuna_heartbeat)
+
+POLL_S = 1.0
+"""Seconds between two looks at the study while waiting for a free slot."""
+PLACE_POLL_S = 0.1
+"""Seconds between two looks while another worker is asking a trial numbered below one of ours."""
+
+
+@dataclasses.dataclass(frozen=True)
+class WorkerConfig:
+    """How one process takes part in a study. None of it is part of the study's config: a study resumes with
+    other values, and its workers may differ. On an RDB storage the heartbeat settings that count are those the
+    storage was opened with (``study.open_study``, which ``ermrl evolve`` gives these)."""
+
+    batch: int | None = None
+    """Trials this worker claims at once (trained as one population), at most; default: popsize, i.e. whole
+    generations for a lone worker. With N workers on one study: ceil(popsize / N)."""
+    worker_index: int = 0
+    """This worker's index among the study's workers (0, 1, ...; e.g. $SLURM_ARRAY_TASK_ID). Worker 0 seeds its
+    sampler with --sampler-seed, worker i > 0 with a seed drawn from (--sampler-seed, i), so that workers draw
+    different candidates."""
+    heartbeat_interval: int = INTERVAL_S
+    """Seconds between two heartbeats of the trials this worker trains."""
+    grace_period: int = GRACE_PERIOD_S
+    """Seconds without a heartbeat after which other workers fail a trial (its worker is gone) and redo it."""
+
+    def __post_init__(self):
+        if self.batch is not None and self.batch < 1:
+            raise ConfigError(f"--batch must be >= 1, got {self.batch}")
+        if self.worker_index < 0:
+            raise ConfigError(f"--worker-index must be >= 0, got {self.worker_index}")
+        if self.heartbeat_interval < 1:
+            raise ConfigError(f"--heartbeat-interval must be >= 1 (seconds), got {self.heartbeat_interval}")
+        if self.grace_period <= self.heartbeat_interval:
+            raise ConfigError(f"--grace-period ({self.grace_period} s) must be longer than --heartbeat-interval "
+                              f"({self.heartbeat_interval} s), or live trials would be failed as lost")
+
+
+def worker_seed(seed: int | None, index: int) -> int | None:
+    """The sampler seed of worker ``index``: ``seed`` itself for worker 0 (a lone worker's draws do not change),
+    else one drawn from (seed, index). Optuna's samplers draw from their own seeded generator (CmaEsSampler's
+    independent sampler, RandomSampler, TPESampler), so workers with one seed would draw the same candidates."""
+    if seed is None or index == 0:
+        return seed
+    return int(np.random.SeedSequence([seed, index]).generate_state(1)[0])
+
+
+def _terminate(signum, frame):
+    """SIGTERM as an exception while a worker holds trials, so that it fails them on the way out (exit 143)."""
+    raise SystemExit(128 + signum)
+
+
+@dataclasses.dataclass(frozen=True)
+class Claim:
+    """Trials this worker holds: asked, sampled and placed in their generation, to train as one population."""
+
+    trials: list[optuna.Trial]
+    phis: list[Phi]
+    generation: int
+    """The (lowest) generation of the trials."""
+    completed: int
+    """Completed trials in the study when they were claimed."""
+
+
+class Worker:
+    """Claims trials of ``study`` for ``config`` (``claim``), keeps them alive while they train, and fails the
+    ones it still holds when it stops early (reason "interrupted": Ctrl-C, SIGTERM; else the error's type). As a
+    context manager in the main thread, it turns SIGTERM (where nothing else handles it) into ``SystemExit(143)``
+    for its lifetime."""
+
+    def __init__(self, study: optuna.Study, config: EvolveConfig, worker: WorkerConfig,
+                 log: Callable[[str], None] = lambda line: None):
+        self.study, self.config, self.worker, self.log = study, config, worker, log
+        self.ledger = Ledger(config.generation_size, cma=isinstance(study.sampler, optuna.samplers.CmaEsSampler))
+        self.batch = worker.batch or config.generation_size
+        self.me = WorkerId.here(worker.worker_index)
+        # an RDB storage has Optuna's heartbeats with the settings it was opened with (study.open_study)
+        self.interval_s, self.grace_s = optuna_heartbeat(study._storage) or (worker.heartbeat_interval,
+                                                                              worker.grace_period)
+        self.heartbeat = Heartbeat(study, self.interval_s, log)
+        self._warned_index = False
+
+    def __enter__(self) -> "Worker":
+        self._sigterm = None
+        if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+            self._sigterm = signal.signal(signal.SIGTERM, _terminate)  # e.g. slurm's time limit or scancel
+        self.heartbeat.start()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if self.heartbeat.trial_ids:
+                stopped = exc_type is None or issubclass(exc_type, (KeyboardInterrupt, SystemExit))
+                self.release(INTERRUPTED if stopped else f"worker error ({exc_type.__name__})")
+        finally:
+            self.heartbeat.stop()
+            if self._sigterm is not None:
+                signal.signal(signal.SIGTERM, self._sigterm)
+
+    def release(self, reason: str) -> None:
+        """Fails every trial this worker still holds, so that nobody waits for them."""
+        for trial_id in sorted(self.heartbeat.trial_ids):
+            try:
+                fail_trial(self.study, trial_id, reason)
+            except Exception as e:  # the storage is unreachable: the heartbeats stop, others fail them later
+                self.log(f"could not fail trial id {trial_id} ({type(e).__name__}); others will once its "
+                         "heartbeat is stale")
+            self.heartbeat.remove(trial_id)
+
+    def finished(self, trials: list[optuna.Trial]) -> None:
+        """Stops the heartbeats of told trials."""
+        for t in trials:
+            self.heartbeat.remove(t._trial_id)
+
+    def claim(self) -> Claim | None:
+        """The next trials to train, or None once the study holds ``config.trials`` completed trials."""
+        waiting = None
+        while True:
+            trials = self._trials()
+            completed = sum(t.state == TrialState.COMPLETE for t in trials)
+            if completed >= self.config.trials:
+                return None
+            running = sum(t.state == TrialState.RUNNING for t in trials)
+            need = self.config.trials - completed - running
+            slots = self.ledger.next_slots(trials)
+            n = min(self.batch, need, slots.free if self.ledger.cma else self.batch)
+            if n > 0:
+                claim = self._ask(n, completed)
+                if claim is not None:
+                    return claim
+                continue
+            reason = (f"generation {slots.generation} is full ({slots.running} of its trials are running in other "
+                      "workers)" if need > 0 else f"the last {running} trials are running in other workers")
+            if reason != waiting:
+                self.log(f"waiting: {reason}")
+                waiting = reason
+            time.sleep(POLL_S)
+
+    def _trials(self) -> list[FrozenTrial]:
+        """The study's trials, after failing those of workers that are gone."""
+        trials = self.study.get_trials(deepcopy=False)
+        if fail_lost(self.study, trials, self.me, self.grace_s, self.log):
+            trials = self.study.get_trials(deepcopy=False)
+        if not self._warned_index:
+            for t in trials:
+                w = t.user_attrs.get(WORKER_ATTR)
+                if t.state == TrialState.RUNNING and isinstance(w, dict) and w.get("index") == self.me.index \
+                        and not self.me.owns(t):
+                    self.log(f"warning: another worker (pid {w.get('pid')} on {w.get('host')}) also runs with "
+                             f"--worker-index {self.me.index}; give each worker its own index, or their sampler "
+                             "draws repeat")
+                    self._warned_index = True
+                    break
+        return trials
+
+    def _ask(self, n: int, completed: int) -> Claim | None:
+        """Asks ``n`` trials, samples their Φ and places each in its generation; fails those that do not fit.
+        None when none fits."""
+        asked = []
+        for _ in range(n):
+            with warnings.catch_warnings():  # Optuna's heartbeats are meant for Study.optimize; ours beat by hand
+                warnings.filterwarnings("ignore", message="Heartbeat of storage")
+                trial = self.study.ask()
+            if self._survives(trial, self._adopt):
+                asked.append(trial)
+        phis = {}
+        for t in asked:
+            if self._survives(t, lambda t: phis.__setitem__(t.number, self.config.space.suggest(t))) \
+                    and self.ledger.cma:  # the sampler chose the generation: record it at once, others wait for it
+                tag = self.study._storage.get_trial_system_attrs(t._trial_id).get(CMA_GENERATION)
+                if not self._survives(t, lambda t: t.set_user_attr(ATTR, 0 if tag is None else int(tag) + 1)):
+                    del phis[t.number]
+        placed = self._place([t for t in asked if t.number in phis])
+        kept = [t for t in asked if placed.get(t.number, -1) >= 0]
+        for t in asked:
+            if t not in kept:
+                self.heartbeat.remove(t._trial_id)
+        if not self.ledger.cma:
+            kept = [t for t in kept if self._survives(t, lambda t: t.set_user_attr(ATTR, placed[t.number]))]
+        if not kept:
+            return None
+        return Claim(kept, [phis[t.number] for t in kept], min(placed[t.number] for t in kept), completed)
+
+    def _adopt(self, trial: optuna.Trial) -> None:
+        """Beats for a trial just asked, then names this worker in it (in this order: see
+        ``heartbeat.WorkerId.lost_reason``)."""
+        self.heartbeat.add(trial._trial_id)
+        trial.set_user_attr(WORKER_ATTR, self.me.record())
+
+    def _survives(self, trial: optuna.Trial, step: Callable[[optuna.Trial], object]) -> bool:
+        """Runs ``step(trial)`` on a trial just asked; False (with a log line, the trial dropped) when another
+        worker failed it meanwhile: this worker stood still longer than the grace period (a paused VM, swapping)."""
+        try:
+            step(trial)
+            return True
+        except UpdateFinishedTrialError:
+            self.heartbeat.remove(trial._trial_id)
+            reason = self.study._storage.get_trial(trial._trial_id).user_attrs.get("failure", "failed")
+            self.log(f"trial {trial.number} was failed meanwhile ({reason}); dropped")
+            return False
+
+    def _place(self, asked: list[optuna.Trial]) -> dict[int, int]:
+        """{number: generation} of the asked trials that fit, in number order; fails those that do not (CMA-ES)
+        and drops those another worker failed meanwhile (-1)."""
+        placed: dict[int, int] = {}
+        rejected: set[int] = set()
+        todo = sorted(t.number for t in asked)
+        ids = {t.number: t._trial_id for t in asked}
+        while todo:
+            trials = [t for t in self._trials() if t.number not in rejected]
+            by_number = {t.number: t for t in trials}
+            while todo:
+                number = todo[0]
+                frozen = by_number[number]
+                if frozen.state != TrialState.RUNNING:  # failed meanwhile (its heartbeat was late)
+                    placed[number] = -1
+                    todo.pop(0)
+                    self.log(f"trial {number} was failed meanwhile ({frozen.user_attrs.get('failure', 'failed')}); "
+                             "dropped")
+                    continue
+                generation = self.ledger.place(frozen, trials, placed)
+                if generation is None:
+                    break
+                todo.pop(0)
+                placed[number] = generation
+                if generation < 0:
+                    rejected.add(number)
+                    trials = [t for t in trials if t.number != number]
+                    if fail_trial(self.study, ids[number], FULL):
+                        self.log(f"trial {number} failed: {FULL} (another worker took the last slot)")
+                    else:
+                        reason = self.study._storage.get_trial(ids[number]).user_attrs.get("failure", "failed")
+                        self.log(f"trial {number} was failed meanwhile ({reason}); dropped")
+            if todo:
+                time.sleep(PLACE_POLL_S)
+        return placed

@@ -1,0 +1,268 @@
+"""Many workers on one study: a real PostgreSQL server, real `ermrl evolve` processes, real kills.
+
+The invariants checked after every multi-worker study: exactly --trials COMPLETE trials, none RUNNING, no Φ twice,
+every CMA-ES generation but the last holds exactly popsize completed trials (the last one at most popsize), each
+trial's generation is the sampler's CMA generation + 1, and the sampler told every CMA generation but the last (its
+stored optimizer moved on), so every completed trial beyond the random startup generation informs CMA-ES.
+"""
+
+import collections
+import pickle
+import signal
+import subprocess
+import sys
+import time
+import warnings
+
+import optuna
+import pytest
+from optuna.trial import TrialState
+
+from ermrl.agent import AgentConfig
+from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.evolve import evolve, make_trainers
+from ermrl.evolution.generations import FULL, Ledger
+from ermrl.evolution.heartbeat import WORKER_ATTR
+from ermrl.evolution.search_space import SearchSpace
+from ermrl.evolution.study import load_study, make_sampler, open_study
+from ermrl.evolution.workers import WorkerConfig, worker_seed
+from ermrl.reservoir import ReservoirSpec
+from ermrl.storage import encode_study_record
+from ermrl.training import TrainConfig
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+POPSIZE, TRIALS = 6, 24
+LOST = "worker lost (no heartbeat for 3 s)"
+
+
+def start_worker(url, study, index, folder, timesteps=2048, batch=2):
+    args = ["evolve", "--env", "CartPoleNoVel-v1", "--units", "10", "--seeds", "1", "--timesteps", str(timesteps),
+            "--fixed-iss", "1.0", "--popsize", str(POPSIZE), "--trials", str(TRIALS), "--batch", str(batch),
+            "--worker-index", str(index), "--heartbeat-interval", "1", "--grace-period", "3",
+            "--storage", url, "--study", study, "--quiet", "--no-estimate"]
+    out, err = open(folder / f"worker{index}.out", "w"), open(folder / f"worker{index}.err", "w")
+    return subprocess.Popen([sys.executable, "-m", "ermrl.cli", *args], stdout=out, stderr=err, cwd=folder)
+
+
+def finish(procs, folder, timeout=600):
+    """Waits for the workers; returns {index: (exit code, stdout, stderr)}."""
+    deadline = time.time() + timeout
+    for p in procs.values():
+        p.wait(timeout=max(1, deadline - time.time()))
+    return {i: (p.returncode, (folder / f"worker{i}.out").read_text(), (folder / f"worker{i}.err").read_text())
+            for i, p in procs.items()}
+
+
+def check_study(study):
+    """The invariants of the module docstring; returns the trials."""
+    trials = study.get_trials(deepcopy=False)
+    complete = [t for t in trials if t.state == TrialState.COMPLETE]
+    assert len(complete) == TRIALS and not [t for t in trials if t.state == TrialState.RUNNING]
+    phis = [tuple(sorted(t.params.items())) for t in complete]
+    assert len(set(phis)) == len(phis), "a Φ was drawn twice"
+    per_generation = collections.Counter(t.user_attrs["generation"] for t in complete)
+    last = max(per_generation)
+    assert sorted(per_generation) == list(range(last + 1))
+    assert all(per_generation[g] == POPSIZE for g in range(1, last)) and per_generation[last] <= POPSIZE
+    assert per_generation[0] <= POPSIZE  # fewer when startup trials failed after one completed (see the docs)
+    for t in trials:
+        tag = t.system_attrs.get("cma:generation")
+        if "generation" in t.user_attrs:
+            assert t.user_attrs["generation"] == (0 if tag is None else tag + 1)
+    carrier = max((t for t in complete if "cma:optimizer:0" in t.system_attrs), key=lambda t: t.number)
+    chunks = sorted((k for k in carrier.system_attrs if k.startswith("cma:optimizer:")),
+                    key=lambda k: int(k.split(":")[-1]))
+    optimizer = pickle.loads(bytes.fromhex("".join(carrier.system_attrs[k] for k in chunks)))
+    assert optimizer.generation == last - 1  # every CMA generation but the last told; the last one waits
+    return trials, per_generation
+
+
+def test_three_workers_share_one_study(postgres_url, tmp_path):
+    procs = {i: start_worker(postgres_url, "three", i, tmp_path) for i in range(3)}
+    results = finish(procs, tmp_path)
+    for i, (code, out, err) in results.items():
+        assert code == 0 and "Traceback" not in err, f"worker {i}: {err}"
+    trials, per_generation = check_study(load_study(postgres_url, "three"))
+    assert per_generation == {g: POPSIZE for g in range(TRIALS // POPSIZE)}
+    workers = {t.user_attrs[WORKER_ATTR]["index"] for t in trials if t.state == TrialState.COMPLETE}
+    assert len(workers) >= 2, "the study was not shared"
+    assert all(t.user_attrs.get("failure") == FULL for t in trials if t.state == TrialState.FAIL)
+
+
+def _holding(study, pid, generation=1):
+    """Trials RUNNING in the worker process ``pid`` in ``generation`` or later (default: past the random startup)."""
+    return [t for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
+            if t.user_attrs.get(WORKER_ATTR, {}).get("pid") == pid and t.user_attrs.get("generation", -1) >= generation]
+
+
+def _wait_for(predicate, what, timeout=300):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def _freeze_while_training(study, proc, generation=1):
+    """Stops ``proc`` (SIGSTOP) at a moment it holds RUNNING trials; returns them (stable while it is stopped)."""
+    while True:
+        _wait_for(lambda: _holding(study, proc.pid, generation), f"worker pid {proc.pid} to train")
+        start = time.monotonic()
+        proc.send_signal(signal.SIGSTOP)
+        held = _holding(study, proc.pid, generation)
+        if held and time.monotonic() - start < 1.0:  # well within the grace period: nobody failed them yet
+            return held
+        proc.send_signal(signal.SIGCONT)  # it told them in between, or the machine is too slow right now
+
+
+def _opened(url, name):
+    try:
+        return load_study(url, name)
+    except Exception:  # not created yet, or its record not written yet
+        return None
+
+
+def test_killed_and_frozen_workers_are_replaced(postgres_url, tmp_path):
+    """Worker 1 is killed (SIGKILL) while it trains: on this machine its process is seen gone, and its trials
+    are failed ("interrupted") and redone. Worker 2 is frozen (SIGSTOP) while it trains, like a machine cut off:
+    its heartbeats stop, the others fail its trials after the grace period and redo them; thawed, it finds them
+    failed, drops their results with a log line, and goes on. The study ends with exactly --trials completed."""
+    procs = {i: start_worker(postgres_url, "faults", i, tmp_path, timesteps=8192) for i in range(3)}
+    study = _wait_for(lambda: _opened(postgres_url, "faults"), "the study")
+    try:
+        killed = _freeze_while_training(study, procs[1])
+        procs[1].send_signal(signal.SIGKILL)
+        procs[1].wait()
+        frozen = _freeze_while_training(study, procs[2])
+        _wait_for(lambda: all(study._storage.get_trial(t._trial_id).state == TrialState.FAIL for t in frozen),
+                  "the frozen worker's trials to be failed")
+    finally:
+        procs[2].send_signal(signal.SIGCONT)
+    results = finish({0: procs[0], 2: procs[2]}, tmp_path)
+    for i, (code, out, err) in results.items():
+        assert code == 0 and "Traceback" not in err, f"worker {i}: {err}"
+    trials, _ = check_study(study)
+    by_id = {t._trial_id: t for t in trials}
+    assert {by_id[t._trial_id].user_attrs["failure"] for t in killed} == {"interrupted"}
+    assert {by_id[t._trial_id].user_attrs["failure"] for t in frozen} == {LOST}
+    for t in frozen:
+        assert f"trial {t.number} was failed meanwhile ({LOST})" in results[2][1]
+    assert f"trial {killed[0].number} failed: interrupted; it will be redone" in results[0][1] + results[2][1]
+    assert {t.user_attrs.get("failure") for t in trials if t.state == TrialState.FAIL} <= {"interrupted", LOST, FULL}
+
+
+def tiny(trials, popsize=4):
+    train = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048,
+                        agent=AgentConfig(spec=ReservoirSpec(units=10)))
+    return EvolveConfig(train=train, space=SearchSpace(fixed_iss=1.0), trials=trials, seeds=1, sampler="cmaes",
+                        popsize=popsize)
+
+
+def test_ctrl_c_fails_the_workers_own_trials(tmp_path):
+    """A worker stopped by Ctrl-C fails the trials it holds ("interrupted"), so that a resumption need not wait."""
+    config = tiny(trials=4)
+    study = open_study(f"sqlite:///{tmp_path}/s.db", "s", make_sampler("cmaes", 4, 0), encode_study_record(config))
+    trainers = make_trainers(config)
+
+    def interrupt(p):
+        if p.train is not None:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        evolve(study, config, trainers, progress_fn=interrupt, worker=WorkerConfig(batch=2))
+    assert [(t.state, t.user_attrs["failure"]) for t in study.trials] == [(TrialState.FAIL, "interrupted")] * 2
+    evolve(study, config, trainers, worker=WorkerConfig(batch=2))
+    assert [t.state for t in study.trials] == [TrialState.FAIL] * 2 + [TrialState.COMPLETE] * 4
+
+
+def test_sigterm_fails_the_workers_own_trials(postgres_url, tmp_path):
+    """SIGTERM (slurm's time limit, scancel) stops a worker like Ctrl-C: its trials fail ("interrupted"), exit 143.
+    (PostgreSQL: on SQLite a worker frozen inside a write would lock this test's reads out.)"""
+    url = postgres_url
+    proc = start_worker(url, "term", 0, tmp_path, timesteps=8192)
+    study = _wait_for(lambda: _opened(url, "term"), "the study")
+    held = _freeze_while_training(study, proc, generation=0)
+    proc.send_signal(signal.SIGTERM)  # delivered when it runs again
+    proc.send_signal(signal.SIGCONT)
+    assert proc.wait(timeout=300) == 143
+    assert "Traceback" not in (tmp_path / "worker0.err").read_text()
+    trials = {t.number: t for t in study.get_trials(deepcopy=False)}
+    assert not [t for t in trials.values() if t.state == TrialState.RUNNING]
+    assert {trials[t.number].user_attrs.get("failure") for t in held} == {"interrupted"}
+
+
+def test_a_trial_left_running_without_heartbeat_is_failed_after_the_grace_period(tmp_path):
+    """A trial left RUNNING by an ermrl version without heartbeats (here: asked the old way, on a journal file) does
+    not block the resumed study: once it is older than the grace period it is failed, and its slot redone."""
+    config = tiny(trials=4)
+    url = f"journal:{tmp_path / 'studies.log'}"
+    study = open_study(url, "old", make_sampler("cmaes", 4, 0), encode_study_record(config))
+    old = study.ask()
+    old.set_user_attr("generation", 0)
+    config.space.suggest(old)
+    lines = []
+    evolve(study, config, worker=WorkerConfig(batch=2, heartbeat_interval=1, grace_period=2), log=lines.append)
+    trials = load_study(url, "old").trials
+    assert (trials[0].state, trials[0].user_attrs["failure"]) == (TrialState.FAIL, "worker lost (no heartbeat for 2 s)")
+    assert [t.state for t in trials[1:]] == [TrialState.COMPLETE] * 4
+    assert "trial 0 failed: worker lost (no heartbeat for 2 s); it will be redone" in lines
+
+
+def test_a_trial_fits_while_its_generation_has_room():
+    """The race rule: a trial fits when fewer than popsize trials of its generation with smaller numbers are
+    running or complete; undecided while a smaller trial's generation is unknown (it is being asked)."""
+    study = optuna.create_study(direction="maximize")
+    dist = {"x": optuna.distributions.FloatDistribution(0, 1)}
+
+    def add(state, tag=None, label=None):
+        study.add_trial(optuna.trial.create_trial(
+            state=state, params={"x": 0.5}, distributions=dist, value=1.0 if state == TrialState.COMPLETE else None,
+            system_attrs={} if tag is None else {"cma:generation": tag},
+            user_attrs={} if label is None else {"generation": label}))
+        return study.get_trials(deepcopy=False)[-1]
+
+    ledger = Ledger(popsize=2, cma=True)
+    for _ in range(2):
+        add(TrialState.COMPLETE, label=0)  # the random startup generation
+    add(TrialState.COMPLETE, tag=0)
+    add(TrialState.FAIL, tag=0)
+    mine = add(TrialState.RUNNING, tag=0)
+    assert ledger.place(mine, study.get_trials(deepcopy=False)) == 1  # the failed trial's slot
+    late = add(TrialState.RUNNING, tag=0)
+    assert ledger.place(late, study.get_trials(deepcopy=False)) == -1  # lost the race for it
+    assert ledger.next_slots(study.get_trials(deepcopy=False)).free == 0
+    asking = add(TrialState.RUNNING)
+    after = add(TrialState.RUNNING, tag=1)
+    assert ledger.place(after, study.get_trials(deepcopy=False)) is None  # trial 6 might be of generation 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        study._storage.set_trial_user_attr(asking._trial_id, "generation", 0)
+    assert ledger.place(after, study.get_trials(deepcopy=False)) == 2
+
+
+def test_worker_seeds():
+    assert worker_seed(7, 0) == 7 and worker_seed(None, 3) is None  # a lone worker draws as before
+    seeds = [worker_seed(7, i) for i in range(8)]
+    assert len(set(seeds)) == 8
+    a, b = (make_sampler("random", 4, s) for s in seeds[:2])
+    study = optuna.create_study()
+    dist = optuna.distributions.FloatDistribution(0, 1)
+    t = study.ask()
+    assert a.sample_independent(study, t._cached_frozen_trial, "x", dist) != \
+        b.sample_independent(study, t._cached_frozen_trial, "x", dist)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--batch", "0"], "--batch must be >= 1, got 0"),
+    (["--worker-index", "-1"], "--worker-index must be >= 0, got -1"),
+    (["--heartbeat-interval", "10", "--grace-period", "10"],
+     "--grace-period (10 s) must be longer than --heartbeat-interval (10 s), or live trials would be failed as lost"),
+])
+def test_bad_worker_flags(args, message, tmp_path):
+    r = subprocess.run([sys.executable, "-m", "ermrl.cli", "evolve", "--trials", "2", "--timesteps", "2048", *args],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert (r.returncode, r.stderr) == (2, f"ermrl evolve: error: {message}\n")
+    assert not list(tmp_path.iterdir())  # nothing written
