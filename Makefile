@@ -68,7 +68,7 @@ demo: $(VENV)/.installed-base
 	$(BIN)/ermrl report --study demo
 
 test: $(VENV)/.installed-test system-deps
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=25
 
 # Slow tests: the MuJoCo v4 smoke tests (and any long learning run marked slow).
 test-slow: $(VENV)/.installed-test

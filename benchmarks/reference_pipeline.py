@@ -1,14 +1,20 @@
-"""Throughput of the reference ER-MRL pipeline (SB3 PPO + ReservoirPy), for comparison.
+"""The reference ER-MRL pipeline (SB3 PPO + ReservoirPy): its throughput, and its fitness for a given Φ.
 
 Each agent is a stable-baselines3 ``PPO("MlpPolicy", env, seed=seed)`` with default
 hyperparameters, trained with ``model.learn(timesteps)`` on a Gymnasium env whose
 observation is replaced by the state of a ReservoirPy reservoir fed with
 concat(obs, action encoding, reward) at every step. One process per agent (seeds
-0..A-1), at most ``--procs`` at a time. Prints agent-steps/s and can write a JSON.
+0..A-1, or from ``--first-seed``), at most ``--procs`` at a time. Prints agent-steps/s and each
+agent's fitness (the mean return of its last 10 training episodes, as ermrl's), and can write a JSON.
+``--sr/--lr/--iss`` set the reservoir's Φ (default: the paper's sr 0.95, lr 0.5, iss 1.0), so that a Φ*
+evolved by ermrl can be trained by the reference stack (peer agreement, docs/paper.md); ``--bias bernoulli``
+gives the reservoir ReservoirPy 0.3's bias (the paper's era and ermrl's default), which 0.4 dropped.
 
-Example:
+Examples:
     python benchmarks/reference_pipeline.py --env CartPoleNoVel-v1 --agents 4 \\
         --timesteps 20000 --procs 2 --json out.json
+    python benchmarks/reference_pipeline.py --agents 4 --timesteps 300000 --sr 0.756 --lr 0.0886 --iss 1.0 \\
+        --bias bernoulli
 """
 
 from __future__ import annotations
@@ -38,7 +44,7 @@ def check_deps() -> None:
         sys.exit(2)
 
 
-def make_env(name: str, seed: int):
+def make_env(name: str, seed: int, sr: float = 0.95, lr: float = 0.5, iss: float = 1.0, bias: str = "none"):
     """Build the reservoir-wrapped env: CartPole-v1 without velocities, or a Gymnasium id as it is."""
     import gymnasium as gym
     import numpy as np
@@ -50,7 +56,12 @@ def make_env(name: str, seed: int):
         def __init__(self, env):
             super().__init__(env)
             self.discrete = isinstance(env.action_space, gym.spaces.Discrete)
-            self.res = Reservoir(units=100, lr=0.5, sr=0.95, input_scaling=1.0, seed=seed)
+            b = 0.0
+            if bias == "bernoulli":  # ReservoirPy 0.3's default (the paper's): ±1 on 10% of the units
+                rng = np.random.default_rng(seed)
+                b = np.zeros(100)
+                b[rng.choice(100, size=10, replace=False)] = rng.choice([-1.0, 1.0], size=10)
+            self.res = Reservoir(units=100, lr=lr, sr=sr, input_scaling=iss, bias=b, seed=seed)
             self.observation_space = gym.spaces.Box(-1.0, 1.0, (100,), np.float32)
 
         def _encode(self, action):
@@ -87,16 +98,23 @@ def make_env(name: str, seed: int):
     return ReservoirWrapper(env)
 
 
-def train_one(env_name: str, seed: int, timesteps: int) -> float:
-    """Worker: train one PPO agent; return its wall time in seconds (learn() only)."""
+def train_one(env_name: str, seed: int, timesteps: int, phi: tuple[float, float, float],
+              bias: str = "none") -> tuple[float, float, int]:
+    """Worker: train one PPO agent on a reservoir with ``phi`` = (sr, lr, iss); return its wall time in seconds
+    (learn() only), its fitness (mean return of its last 10 training episodes) and its episode count."""
     import torch
     from stable_baselines3 import PPO
 
     torch.set_num_threads(1)
-    model = PPO("MlpPolicy", make_env(env_name, seed), seed=seed, device="cpu", verbose=0)
+    from stable_baselines3.common.monitor import Monitor
+
+    env = Monitor(make_env(env_name, seed, *phi, bias=bias))
+    model = PPO("MlpPolicy", env, seed=seed, device="cpu", verbose=0)
     t0 = time.perf_counter()
     model.learn(total_timesteps=timesteps)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    returns = env.get_episode_rewards()
+    return wall, float(sum(returns[-10:]) / max(len(returns[-10:]), 1)), len(returns)
 
 
 def main(argv=None) -> int:
@@ -105,16 +123,28 @@ def main(argv=None) -> int:
     p.add_argument("--agents", type=int, default=4, help="independent trainings, seeds 0..A-1 (default: %(default)s)")
     p.add_argument("--timesteps", type=int, default=20000, help="model.learn() budget per agent (default: %(default)s)")
     p.add_argument("--procs", type=int, default=2, help="max worker processes at a time (default: %(default)s)")
+    p.add_argument("--first-seed", type=int, default=0, help="seed of the first agent (default: %(default)s)")
+    p.add_argument("--sr", type=float, default=0.95, help="spectral radius (default: %(default)s)")
+    p.add_argument("--lr", type=float, default=0.5, help="leak rate (default: %(default)s)")
+    p.add_argument("--iss", type=float, default=1.0, help="input scaling (default: %(default)s)")
+    p.add_argument("--bias", choices=("none", "bernoulli"), default="none",
+                   help="the reservoir's bias: none (ReservoirPy 0.4) or bernoulli (0.3, the paper's, and ermrl's "
+                        "default) (default: %(default)s)")
     p.add_argument("--json", metavar="PATH", help="write the results as JSON to PATH")
     a = p.parse_args(argv)
+    if a.agents < 1 or a.timesteps < 1 or a.procs < 1:
+        p.error("--agents, --timesteps and --procs must be >= 1")
+    if not (a.sr > 0 and 0 < a.lr <= 1 and a.iss > 0):
+        p.error(f"Φ out of range: sr {a.sr} and iss {a.iss} must be > 0, lr {a.lr} in (0, 1]")
     check_deps()
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"  # inherited by the spawned workers before numpy/torch load
 
     t0 = time.perf_counter()
     with cf.ProcessPoolExecutor(max_workers=a.procs, mp_context=mp.get_context("spawn")) as pool:
-        jobs = [pool.submit(train_one, a.env, s, a.timesteps) for s in range(a.agents)]
-        per_agent = [j.result() for j in jobs]
+        seeds = list(range(a.first_seed, a.first_seed + a.agents))
+        jobs = [pool.submit(train_one, a.env, s, a.timesteps, (a.sr, a.lr, a.iss), a.bias) for s in seeds]
+        per_agent, fitness, episodes = zip(*(j.result() for j in jobs))
     wall = time.perf_counter() - t0
 
     # SB3 rounds learn() up to whole rollouts (n_steps=2048); report the requested budget.
@@ -122,10 +152,14 @@ def main(argv=None) -> int:
         "env": a.env, "agents": a.agents, "timesteps": a.timesteps, "procs": a.procs, "wall_s": wall,
         "agent_steps_per_s": a.agents * a.timesteps / wall,
         "per_agent_steps_per_s": [a.timesteps / t for t in per_agent],
+        "phi": {"sr": a.sr, "lr": a.lr, "iss": a.iss}, "bias": a.bias, "seeds": seeds,
+        "fitness": list(fitness), "episodes": list(episodes),
     }
     print(f"{a.env}: {a.agents} agents x {a.timesteps} steps, {a.procs} procs, wall {wall:.1f}s")
     print(f"total: {res['agent_steps_per_s']:.0f} agent-steps/s (incl. process start-up)")
     print("per process: " + ", ".join(f"{v:.0f}" for v in res["per_agent_steps_per_s"]) + " steps/s (learn() only)")
+    mean = sum(fitness) / len(fitness)
+    print(f"fitness (mean of the last 10 episodes) per seed: {', '.join(f'{v:.1f}' for v in fitness)}; mean {mean:.1f}")
     if a.json:
         with open(a.json, "w") as f:
             json.dump(res, f, indent=2)

@@ -1,8 +1,16 @@
-"""The one exception type for bad user input; the CLI turns it into a one-line message and exit code 2."""
+"""The exception types the CLI turns into one-line messages: bad user input (exit code 2) and a run that cannot
+go on for a reason that is not a bug (exit code 1)."""
 
 
 class ConfigError(ValueError):
     """Bad input from the user (unknown env id, bad bounds, bad storage URL, ...).
 
     The message is one line that names the problem and the fix.
+    """
+
+
+class RunFailed(RuntimeError):
+    """A run that stopped for a known reason that is not a bug (e.g. every trial of several batches diverged).
+
+    The message is one line that says what happened and where to look; what was done before is kept.
     """

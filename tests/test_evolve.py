@@ -15,6 +15,7 @@ import pytest
 from optuna.trial import TrialState
 
 from ermrl.agent import AgentConfig, Phi
+from ermrl.errors import RunFailed
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.evolve import evolve
 from ermrl.storage import decode_study_record, encode_study_record
@@ -64,6 +65,23 @@ def test_divergent_candidate_is_failed_and_the_study_goes_on(tmp_path):
     assert len(failed) == 1 and failed[0].params["lr"] == 5.0
     assert failed[0].user_attrs["failure"] == "diverged (NaN/inf) on 2 of 2 seeds"
     assert sum(t.state == TrialState.COMPLETE for t in study.trials) == 4
+
+
+def test_three_batches_without_a_completed_trial_stop_the_run_with_a_reason(tmp_path):
+    """Every trial of three batches in a row diverges: the worker stops with RunFailed (one line, exit code 1 in the
+    CLI, not an "unexpected" bug) and keeps the failed trials with their reasons."""
+    config = tiny(trials=8, sampler="random", popsize=2, space=SearchSpace())
+    study = open_study(f"sqlite:///{tmp_path}/s.db", "s", make_sampler("random", 2, 0), encode_study_record(config))
+    with warnings.catch_warnings():  # a leak rate of 5 is outside the search space: x grows ×4 per step
+        warnings.simplefilter("ignore", UserWarning)
+        for _ in range(6):
+            study.enqueue_trial({"sr": 1.0, "lr": 5.0, "iss": 1.0})
+        with pytest.raises(RunFailed) as e:
+            evolve(study, config)
+    assert str(e.value) == ("3 batches in a row had no completed trial; see the trials' 'failure' attributes "
+                            "(`ermrl report`), fix the cause, then rerun to resume")
+    assert [(t.state, t.user_attrs["failure"]) for t in study.trials] == \
+        [(TrialState.FAIL, "diverged (NaN/inf) on 2 of 2 seeds")] * 6
 
 
 def test_extreme_but_valid_phi_stays_finite():

@@ -266,3 +266,25 @@ def test_bad_worker_flags(args, message, tmp_path):
                        capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert (r.returncode, r.stderr) == (2, f"ermrl evolve: error: {message}\n")
     assert not list(tmp_path.iterdir())  # nothing written
+
+
+def test_database_passwords_are_never_printed(postgres_url, tmp_path):
+    """A password in a PostgreSQL URL (the server trusts any) is shown as *** in every line and message: the
+    evolution's progress and hints, a missing study's error, an unreachable server's error."""
+    url = postgres_url.replace("postgresql://ermrl@", "postgresql://ermrl:s3cret@")
+    shown = postgres_url.replace("postgresql://ermrl@", "postgresql://ermrl:***@")
+    cli = [sys.executable, "-m", "ermrl.cli"]
+    r = subprocess.run([*cli, "evolve", "--env", "CartPoleNoVel-v1", "--units", "10", "--seeds", "1", "--timesteps",
+                        "2048", "--fixed-iss", "1.0", "--popsize", "2", "--trials", "2", "--storage", url, "--study", "p",
+                        "--quiet", "--no-estimate"], capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert f"study 'p' in {shown}: 0/2 trials done" in r.stdout and f"--storage {shown}" in r.stdout
+    r2 = subprocess.run([*cli, "select", "--study", "nope", "--storage", url], capture_output=True, text=True,
+                        cwd=tmp_path, timeout=300)
+    assert (r2.returncode, r2.stderr) == (2, f"ermrl select: error: no study 'nope' in '{shown}'; studies there: p\n")
+    dead = "postgresql://ermrl:s3cret@127.0.0.1:1/db"
+    r3 = subprocess.run([*cli, "report", "--study", "p", "--storage", dead], capture_output=True, text=True,
+                        cwd=tmp_path, timeout=300)
+    assert r3.returncode == 2 and r3.stderr.startswith(
+        "ermrl report: error: cannot open storage 'postgresql://ermrl:***@127.0.0.1:1/db' (")
+    assert not any("s3cret" in s for s in (r.stdout, r.stderr, r2.stdout, r2.stderr, r3.stdout, r3.stderr))

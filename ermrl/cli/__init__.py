@@ -10,7 +10,7 @@ import sys
 import traceback
 
 import ermrl
-from ermrl.errors import ConfigError
+from ermrl.errors import ConfigError, RunFailed
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -127,6 +127,11 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
         print(f"{command}: error: {e}", file=sys.stderr)
         return 2
+    except RunFailed as e:
+        if debug:
+            traceback.print_exc()
+        print(f"{command}: error: {e}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -132,7 +132,9 @@ def _storage(args) -> str:
 
 
 def _storage_flag(args) -> str:
-    out = f" --storage {args.storage}" if args.storage else ""
+    from ermrl.evolution.study import shown_url
+
+    out = f" --storage {shown_url(args.storage)}" if args.storage else ""
     return out + (f" --out {args.out}" if args.out else "")
 
 
@@ -260,7 +262,7 @@ def cmd_evolve(args) -> int:
     from ermrl.cli.progress import EvolutionBar
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.evolve import count, estimate_seconds, evolve, make_trainers
-    from ermrl.evolution.study import ATTR, SAMPLERS, make_sampler, open_study
+    from ermrl.evolution.study import ATTR, SAMPLERS, make_sampler, open_study, shown_url
     from ermrl.evolution.workers import WorkerConfig, worker_seed
     from ermrl.experiments import baseline_runs
 
@@ -294,8 +296,8 @@ def cmd_evolve(args) -> int:
     stored = storage.decode_study_record(study.user_attrs[ATTR])
     config = dataclasses.replace(config, baselines=stored.baselines)  # a resumed study keeps its constants
     done = count(study, optuna.trial.TrialState.COMPLETE)
-    print(f"study {name!r} in {storage_url}: {done}/{args.trials} trials done, {config.generation_size} per generation "
-          f"× {args.seeds} seeds × {args.timesteps:,} steps" + (f" on {len(env_ids)} envs" if config.normalized else ""))
+    print(f"study {name!r} in {shown_url(storage_url)}: {done}/{args.trials} trials done, "
+          f"{config.generation_size} per generation × {args.seeds} seeds × {args.timesteps:,} steps" + (f" on {len(env_ids)} envs" if config.normalized else ""))
     trainers = make_trainers(config)
     if done < args.trials and not args.no_estimate:
         batch = min(worker.batch or config.generation_size, args.trials - done)

@@ -31,7 +31,7 @@ def add_parser(sub, formatter) -> None:
 
 
 def run_command(args) -> int:
-    from ermrl.evolution.study import default_storage, load_study, make_storage
+    from ermrl.evolution.study import default_storage, load_study, make_storage, shown_url
 
     if not 0 <= args.port <= 65535:
         raise ConfigError(f"--port {args.port} is not a port; give 1..65535, or 0 for any free port")
@@ -47,7 +47,7 @@ def run_command(args) -> int:
     host, port = server.server_address[:2]
     host = f"[{host}]" if ":" in host else host
     study_id = storage.get_study_id_from_name(args.study)
-    print(f"optuna-dashboard for study {args.study!r} in {_shown(url)}", flush=True)
+    print(f"optuna-dashboard for study {args.study!r} in {shown_url(url)}", flush=True)
     print(f"open http://{host}:{port}/dashboard/studies/{study_id} (Ctrl-C stops it)", flush=True)
     try:
         server.serve_forever()
@@ -56,17 +56,6 @@ def run_command(args) -> int:
     finally:
         server.server_close()
     return 0
-
-
-def _shown(url: str) -> str:
-    """``url`` as printed: a database server's password hidden."""
-    from ermrl.evolution.study import storage_file
-
-    if storage_file(url) is not None:
-        return url
-    from sqlalchemy.engine import make_url
-
-    return make_url(url).render_as_string(hide_password=True)
 
 
 def _listen(app, host: str, port: int):

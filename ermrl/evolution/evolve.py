@@ -23,6 +23,7 @@ import optuna
 from optuna.exceptions import UpdateFinishedTrialError
 from optuna.trial import TrialState
 
+from ermrl.errors import RunFailed
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.scoring import score
 from ermrl.evolution.workers import Worker, WorkerConfig
@@ -164,8 +165,8 @@ def evolve(study: optuna.Study, config: EvolveConfig, trainers: dict[str, Traine
             me.finished(claim.trials)
             failed_in_a_row = failed_in_a_row + 1 if failed and not done else 0
             if failed_in_a_row >= MAX_FAILED_BATCHES:
-                raise RuntimeError(f"{MAX_FAILED_BATCHES} batches in a row had no completed trial; "
-                                   "see the trials' 'failure' attributes")
+                raise RunFailed(f"{MAX_FAILED_BATCHES} batches in a row had no completed trial; see the trials' "
+                                "'failure' attributes (`ermrl report`), fix the cause, then rerun to resume")
             if progress_fn is not None:
                 progress_fn(GenerationProgress(claim.generation, config.env_ids[0], count(study, TrialState.COMPLETE),
                                                config.trials, *_best(study), None))

@@ -61,8 +61,22 @@ def make_storage(url: str, heartbeat: tuple[int, int] | None = None) -> optuna.s
         raise
     except Exception as e:  # sqlalchemy raises many types; all mean the URL is unusable
         reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise ConfigError(f"cannot open storage {url!r} ({reason}); use sqlite:///PATH.db, a journal file PATH.log, "
+        raise ConfigError(f"cannot open storage {shown_url(url)!r} ({reason}); use sqlite:///PATH.db, a journal file PATH.log, "
                           "or a reachable database URL") from None
+
+
+def shown_url(url: str) -> str:
+    """``url`` as printed or put in a message: a database server's password replaced by ``***``; files as they are."""
+    if url.startswith("journal:") or url.endswith((".log", ".jsonl")) or url.startswith("sqlite:"):
+        return url
+    from sqlalchemy.engine import make_url
+
+    try:
+        return make_url(url).render_as_string(hide_password=True)
+    except Exception:  # not a URL SQLAlchemy can parse: hide whatever sits between "user:" and "@"
+        import re
+
+        return re.sub(r"(://[^:/@]*:)[^@]*@", r"\1***@", url)
 
 
 def _rdb_storage(url: str, engine_kwargs: dict, kwargs: dict) -> optuna.storages.RDBStorage:
@@ -88,7 +102,7 @@ def _driver_url(url: str) -> str:
     if scheme not in ("postgresql", "postgres", "postgresql+psycopg") or not sep:
         return url
     if importlib.util.find_spec("psycopg") is None:
-        raise ConfigError(f"cannot open storage {url!r}: the PostgreSQL driver is not installed; run "
+        raise ConfigError(f"cannot open storage {shown_url(url)!r}: the PostgreSQL driver is not installed; run "
                           "pip install 'ermrl[workers]'")
     return f"postgresql+psycopg://{rest}"
 
@@ -120,7 +134,7 @@ def open_study(storage_url: str, name: str, sampler, record: dict | None,
         study = optuna.create_study(storage=storage, study_name=name, sampler=sampler, direction="maximize",
                                     load_if_exists=True)
     except Exception as e:
-        raise ConfigError(f"cannot open study {name!r} in {storage_url!r} ({str(e).splitlines()[0]})") from None
+        raise ConfigError(f"cannot open study {name!r} in {shown_url(storage_url)!r} ({str(e).splitlines()[0]})") from None
     if record is not None:
         stored = study.user_attrs.get(ATTR)
         if stored is None:
@@ -145,7 +159,7 @@ def load_study(storage_url: str, name: str) -> optuna.Study:
         study = optuna.load_study(study_name=name, storage=storage)
     except KeyError:
         names = [s.study_name for s in optuna.get_all_study_summaries(storage)]
-        raise ConfigError(f"no study {name!r} in {storage_url!r}; studies there: {', '.join(names) or 'none'}") from None
+        raise ConfigError(f"no study {name!r} in {shown_url(storage_url)!r}; studies there: {', '.join(names) or 'none'}") from None
     if ATTR not in study.user_attrs:
         raise ConfigError(f"study {name!r} was not made by `ermrl evolve` (no '{ATTR}' attribute)")
     return study
