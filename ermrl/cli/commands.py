@@ -360,7 +360,7 @@ def cmd_test(args) -> int:
     progress, close = _bars(args.quiet)
     timings = tensorboard.Timings(progress)  # the bars, and each population's update times for time/fps
     try:
-        rows = run_test_phase(study, out, test, timings, save_agents=args.save_agents)
+        rows = run_test_phase(study, out, test, timings, save_agents=args.save_agents, log=print)
     finally:
         close()
     if args.tensorboard is not None:  # from curves.csv: run_test_phase keeps its Results to itself

@@ -9,6 +9,8 @@ from ermrl.errors import ConfigError
 
 
 def add_parser(sub, formatter) -> None:
+    from ermrl.experiments.runner import TestBudget  # lazily, like the options' dataclasses
+
     p = sub.add_parser("experiment", help="the paper's experiments by name: list them, or run one at a scale",
                        description="`ermrl experiment list` names every experiment of the paper and its appendix; "
                                    "`ermrl experiment run NAME --scale smoke|small|paper` runs its evolutions, "
@@ -28,6 +30,10 @@ def add_parser(sub, formatter) -> None:
     run.add_argument("--baselines", type=Path, default=None, metavar="TABLE",
                      help="baselines table for studies over several envs (default runs/baselines.json over the shipped one)")
     run.add_argument("--no-estimate", action="store_true", help="do not measure env step costs for the estimate")
+    for flag, field, kwargs in (("--test-seeds", "seeds", {"type": int, "metavar": "N"}),
+                                ("--test-timesteps", "timesteps", {"type": int, "metavar": "N"}),
+                                ("--test-lrs", "ermrl_lrs", {"type": float, "nargs": "+", "metavar": "LR"})):
+        options.Option(flag, TestBudget, field, kwargs=kwargs).add_to(run)
     options.add_options(run, "env", skip=("--timesteps",))
     options.add_config_option(run)
     run.add_argument("--quiet", action="store_true", help="no progress display")
@@ -61,6 +67,8 @@ def _run(args) -> int:
     from ermrl.experiments import registry, runner
 
     experiment, scale = registry.get(args.name), registry.get_scale(args.scale)
+    budget = runner.TestBudget(args.test_seeds, args.test_timesteps,
+                               None if args.test_lrs is None else tuple(args.test_lrs))
     names = {s.name for s in experiment.studies}
     unknown = [n for n in args.only if n not in names]
     if unknown:
@@ -71,7 +79,7 @@ def _run(args) -> int:
         raise ConfigError(f"experiment {experiment.name} has no study {unknown[0]!r}; its studies: "
                           f"{', '.join(sorted(names))}{hint}")
     folder = storage.check_folder(args.out or runner.experiment_dir(experiment, scale))
-    plans = [p for p in runner.plan(experiment, scale, folder, args.backend, args.env_workers)
+    plans = [p for p in runner.plan(experiment, scale, folder, args.backend, args.env_workers, budget)
              if not args.only or p.spec.name in args.only]
     if any(p.config.normalized for p in plans):  # a damaged table fails now, not after the first studies
         from ermrl.experiments import baselines
@@ -97,7 +105,7 @@ def _run(args) -> int:
     progress, close = _bars(args.quiet)
     try:
         report = runner.run_experiment(experiment, scale, folder, url, args.backend, args.env_workers, tuple(args.only),
-                                       print, progress, args.baselines)
+                                       print, progress, args.baselines, budget)
     finally:
         close()
     print(f"report: {report.resolve()}")

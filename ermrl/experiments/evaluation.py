@@ -28,6 +28,7 @@ from ermrl.envs import masking
 from ermrl.errors import ConfigError
 from ermrl.evolution.selection import chosen_trial
 from ermrl.evolution.study import ATTR
+from ermrl.experiments import checkpoints
 from ermrl.training import Population, Results, Trainer, recurrent
 
 FIRST_TEST_SEED = 1000
@@ -116,13 +117,18 @@ def _phi_text(phi: Phi, k: int, trial: int) -> str:
 
 
 def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
-                   progress: Callable[[str], Callable] | None = None, save_agents: bool = True) -> list[dict]:
+                   progress: Callable[[str], Callable] | None = None, save_agents: bool = True,
+                   log: Callable[[str], None] | None = None) -> list[dict]:
     """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
     into ``out`` (checked before any training, written all at once at the end: :func:`ermrl.storage.staged_folder`),
     and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
     ermrl, ermrl-lr-LR with several learning rates, ppo, ppo-full-observation, ppo-lstm). Returns one summary row
     per model (see :func:`summarize`), each ER-MRL row with its probability of improvement over every PPO baseline
-    (PPO-LSTM included)."""
+    (PPO-LSTM included).
+
+    Each trained model is kept in ``out.partial/`` until ``out`` is written (:mod:`ermrl.experiments.checkpoints`):
+    a rerun after a stop loads the models finished for the same settings and Φ* instead of training them again,
+    telling ``log`` "kept MODEL from an earlier run"; the outputs are the same as those of an uninterrupted run."""
     config = storage.decode_study_record(study.user_attrs[ATTR])
     trial, phi, how = chosen_trial(study, config, test.trial)
     env_id = test.env_id or config.env_ids[0]
@@ -154,10 +160,21 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
         jobs.append(("PPO-LSTM", lstm, Population.grid(no_phi, seeds, ppo_lr, 0), ["PPO-LSTM (same observation)"]))
         folders["PPO-LSTM (same observation)"] = "ppo-lstm"
 
+    partial, discarded = checkpoints.open_partial(out, {"test": storage.to_dict(test), "phi_trial": trial.number})
+    if discarded and log:
+        log(f"discarded the models of an unfinished test phase with other settings ({partial})")
     curves, seed_map, rows, agents = {}, {}, [], []
     for kind, train_config, population, model_labels in jobs:
-        fn = progress(model_labels[0] if len(model_labels) == 1 else kind) if progress else None
-        results = Trainer(train_config).run(population, fn)
+        name = folders[model_labels[0]] if len(model_labels) == 1 else "ermrl"
+        identity = _job_identity(name, model_labels, train_config, population)
+        results = checkpoints.load_job(partial, name, identity)
+        if results is not None:
+            if log:
+                log(f"kept {', '.join(model_labels)} from an earlier run ({partial / name}.npz)")
+        else:
+            fn = progress(model_labels[0] if len(model_labels) == 1 else kind) if progress else None
+            results = Trainer(train_config).run(population, fn)
+            checkpoints.save_job(partial, name, identity, results)
         for m, label in enumerate(model_labels):
             part = results.select(np.arange(m * len(seeds), (m + 1) * len(seeds)))
             curves[label] = part.curves()
@@ -183,7 +200,18 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
                                                         "phi_choice": how, "evolved_on": evolved_on})
         learning_curves(curves, title, stage / "test_phase", ("png", "svg"))
         storage.write_test_summary(stage, rows)
+    checkpoints.discard(out)
     return rows
+
+
+def _job_identity(name: str, labels: list[str], train_config, population: Population) -> dict:
+    """What a test job's results depend on (beyond the test phase's settings), JSON-ready: the env workers are
+    left out, since results do not depend on their number."""
+    train = storage.to_dict(train_config)
+    train.pop("env_workers", None)
+    return {"job": name, "labels": list(labels), "train": train, "seeds": population.seeds.tolist(),
+            "learning_rates": population.learning_rate.tolist(),
+            "phi": {f: np.asarray(v).tolist() for f, v in population.phi._asdict().items()}}
 
 
 def _add_improvement(rows: list[dict]) -> None:

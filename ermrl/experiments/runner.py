@@ -37,6 +37,33 @@ class StudyPlan:
     tests: tuple[TestConfig, ...]
 
 
+@dataclasses.dataclass(frozen=True)
+class TestBudget:
+    """Overrides of every test phase of a run (``--test-seeds``, ``--test-timesteps``, ``--test-lrs``); None keeps
+    the scale's or the study's value. They change the test phases only, never the studies' stored configs, so a
+    rerun with other values keeps the evolutions and selections and redoes only the test phases."""
+
+    seeds: int | None = None
+    """New seeds per model in every test phase; None: the scale's (smoke 1, small 5, paper 10)."""
+    timesteps: int | None = None
+    """Env steps per agent in every test phase, the long ones (LunarLander) included; None: the scale's."""
+    ermrl_lrs: tuple[float, ...] | None = None
+    """ER-MRL's learning rates in every test phase, one model each; None: the study's (e.g. 3e-4 1e-4 5e-5)."""
+
+    def __post_init__(self):
+        if self.seeds is not None and self.seeds < 1:
+            raise ConfigError(f"--test-seeds must be >= 1, got {self.seeds}")
+        if self.timesteps is not None and self.timesteps < 1:
+            raise ConfigError(f"--test-timesteps must be >= 1, got {self.timesteps}")
+        if self.ermrl_lrs is not None and not self.ermrl_lrs:
+            raise ConfigError("--test-lrs needs at least one learning rate, e.g. --test-lrs 1e-4")
+        for i, lr in enumerate(self.ermrl_lrs or ()):
+            if not 0 < lr < 1:
+                raise ConfigError(f"--test-lrs: learning rate {lr:g} is outside (0, 1); the paper uses 3e-4 or 1e-4")
+            if lr in self.ermrl_lrs[:i]:
+                raise ConfigError(f"--test-lrs gives {lr:g} twice; give each learning rate once")
+
+
 def experiment_dir(experiment: Experiment, scale: Scale, root: Path = Path("runs") / "experiments") -> Path:
     return root / f"{experiment.name}-{scale.name}"
 
@@ -47,7 +74,8 @@ def default_storage(folder: Path) -> str:
 
 
 def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "auto",
-         env_workers: int | str = "auto") -> list[StudyPlan]:
+         env_workers: int | str = "auto", budget: TestBudget = TestBudget()) -> list[StudyPlan]:
+    """Every study of ``experiment`` at ``scale``, its test phases at ``budget``'s overrides of the scale's."""
     plans = []
     for spec in experiment.studies:
         agent = AgentConfig(reservoirs=spec.reservoirs, spec=ReservoirSpec(units=spec.units),
@@ -58,8 +86,9 @@ def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "aut
         config = EvolveConfig(train=train, space=SearchSpace(spec.reservoirs, fixed_iss=spec.fixed_iss),
                               trials=scale.trials, seeds=scale.seeds, popsize=scale.popsize,
                               envs=spec.envs if len(spec.envs) > 1 else ())
-        steps = scale.long_test_timesteps if spec.long_test else scale.test_timesteps
-        tests = tuple(TestConfig(seeds=scale.test_seeds, timesteps=steps, ermrl_lrs=spec.ermrl_lrs, ppo_lr=spec.ppo_lr,
+        steps = budget.timesteps or (scale.long_test_timesteps if spec.long_test else scale.test_timesteps)
+        tests = tuple(TestConfig(seeds=budget.seeds or scale.test_seeds, timesteps=steps,
+                                 ermrl_lrs=budget.ermrl_lrs or spec.ermrl_lrs, ppo_lr=spec.ppo_lr,
                                  env_id=None if (e,) == spec.envs else e, auc_steps=min(300_000, steps))
                       for e in spec.tested_on)
         name = f"{experiment.name}-{scale.name}-{spec.name}"
@@ -99,21 +128,23 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None)
 def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_url: str | None = None,
                    backend: str = "auto", env_workers: int | str = "auto", only: tuple[str, ...] = (),
                    log: Callable[[str], None] = print, progress: Callable | None = None,
-                   baselines_table: Path | None = None) -> Path:
+                   baselines_table: Path | None = None, budget: TestBudget = TestBudget()) -> Path:
     """Runs (or resumes) every study of ``experiment`` (or those named in ``only``); returns the report's path.
     Studies over several envs take their constants from ``baselines_table`` (default runs/baselines.json over
-    the shipped table), computing the missing ones first."""
+    the shipped table), computing the missing ones first. ``budget`` overrides the test phases' budgets; a test
+    phase stopped midway keeps its finished models for the rerun (:mod:`ermrl.experiments.checkpoints`)."""
     import optuna
 
     from ermrl.analysis.experiment_report import write_experiment_report
     from ermrl.evolution.evolve import evolve, make_trainers
     from ermrl.evolution.selection import load_selection, ranked_trials, select
     from ermrl.evolution.study import ATTR, make_sampler, open_study
-    from ermrl.experiments import baseline_runs, baselines
+    from ermrl.experiments import baseline_runs, baselines, checkpoints
     from ermrl.experiments.evaluation import run_test_phase, test_dir
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    plans = [p for p in plan(experiment, scale, folder, backend, env_workers) if not only or p.spec.name in only]
+    plans = [p for p in plan(experiment, scale, folder, backend, env_workers, budget)
+             if not only or p.spec.name in only]
     url = storage_url or default_storage(folder)
     for i, p in enumerate(plans):
         start = time.perf_counter()
@@ -136,10 +167,14 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
         log(f"    Φ* = trial {sel.winner} (selected among the top {len(sel.trials)} on {len(sel.seeds)} fresh seeds)")
         for t in p.tests:
             out = test_dir(p.run_dir, study.user_attrs[ATTR], t.env_id)
+            where = f"    test on {t.env_id or config.env_ids[0]}"
             if _test_done(out, t, sel.winner):
-                log(f"    test on {t.env_id or config.env_ids[0]}: done before, kept ({out})")
+                checkpoints.discard(out)  # left by a stop between writing the test phase and removing it
+                log(f"{where}: done before, kept ({out})")
                 continue
-            rows = run_test_phase(study, out, t, progress)
+            lrs = ", ".join(f"{lr:g}" for lr in t.ermrl_lrs)
+            log(f"{where}: {t.seeds} seeds × {t.timesteps:,} steps, ER-MRL at lr {lrs}")
+            rows = run_test_phase(study, out, t, progress, log=lambda s, where=where: log(f"{where}: {s}"))
             for r in rows:
                 log(f"    test on {r['env_id']}: {r['model']}: final {r['final_mean']:.1f} ± {r['final_std']:.1f}"
                     if r["final_mean"] is not None else f"    test on {r['env_id']}: {r['model']}: all seeds diverged")

@@ -1,0 +1,129 @@
+"""The finished models of an unfinished test phase, kept so that a rerun trains only what is missing.
+
+A test phase trains its models one after another (ER-MRL at its learning rates, PPO on the same and on the full
+observation, PPO-LSTM), which on a host env takes hours. As each model (one trained population, a *job*)
+finishes, its :class:`~ermrl.training.results.Results` go whole into ``OUT.partial/JOB.npz`` beside the test
+phase's folder ``OUT``, written atomically and tagged with the job's identity: the test phase's settings (its
+TestConfig and Φ*'s trial), the job's name and labels, its TrainConfig and its population (seeds, learning rates,
+Φ). A rerun loads a job whose identity is the same instead of training it again. The folder's ``settings.json``
+holds the settings it was made for; a folder made for other settings is emptied first, so models trained for
+other settings are never mixed in. When the test phase is written, the folder is removed.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from ermrl import storage
+from ermrl.envs.spaces import EnvInfo
+from ermrl.training.results import Episodes, Policies, Results
+
+FORMAT = "ermrl-test-job"
+VERSION = 1
+SETTINGS = "settings.json"
+
+
+def partial_dir(out: Path) -> Path:
+    """Where the finished models of the test phase ``out`` wait: ``out.parent / (out.name + ".partial")``."""
+    out = Path(out)
+    return out.parent / f"{out.name}.partial"
+
+
+def _plain(obj):
+    """``obj`` as it reads back from JSON (tuples become lists, NumPy values Python ones), to compare identities."""
+    return json.loads(json.dumps(obj, default=storage._json_default))
+
+
+def open_partial(out: Path, settings: dict) -> tuple[Path, bool]:
+    """The partial folder of ``out`` for ``settings`` (JSON-ready), created if needed. Returns (folder,
+    discarded): ``discarded`` is True when a folder made for other settings was there and has been emptied."""
+    folder = partial_dir(out)
+    path = folder / SETTINGS
+    discarded = False
+    if folder.exists():
+        try:
+            same = storage.read_json(path) == _plain(settings)
+        except (OSError, ValueError):  # missing or damaged: nothing in it can be trusted
+            same = False
+        if same:
+            return folder, False
+        shutil.rmtree(folder)
+        discarded = True
+    storage.write_json(path, settings)
+    return folder, discarded
+
+
+def discard(out: Path) -> None:
+    """Removes the partial folder of ``out``, if any (the test phase is written, or a rerun will redo it)."""
+    shutil.rmtree(partial_dir(out), ignore_errors=True)
+
+
+def save_job(folder: Path, name: str, identity: dict, results: Results) -> Path:
+    """Writes ``results`` (A agents) to ``folder/NAME.npz`` atomically, with ``identity`` (JSON-ready)."""
+    meta = {"format": FORMAT, "version": VERSION, "identity": _plain(identity), "env_id": results.env_id,
+            "total_timesteps": int(results.total_timesteps),
+            "timesteps_per_iteration": int(results.timesteps_per_iteration),
+            "compile_s": float(results.compile_s), "train_s": float(results.train_s),
+            "env": None if results.policies is None else storage.to_dict(results.policies.env),
+            "log_std": results.policies is not None and results.policies.log_std is not None,
+            "phi": list(results.phi), "metrics": list(results.metrics)}  # in order: agent files list Φ so
+    episodes = results.episodes
+    arrays = {"seeds": results.seeds, "learning_rate": results.learning_rate, "finite": results.finite,
+              "episode_counts": np.array([len(e.ret) for e in episodes], np.int64),
+              "episode_timestep": _concat([e.timestep for e in episodes], np.int64),
+              "episode_ret": _concat([e.ret for e in episodes], np.float64),
+              "episode_length": _concat([e.length for e in episodes], np.int64),
+              **{f"phi/{k}": v for k, v in results.phi.items()},
+              **{f"metrics/{k}": v for k, v in results.metrics.items()}}
+    if results.policies is not None:
+        arrays.update(storage._flatten(results.policies.actor, "actor"))
+        arrays.update(storage._flatten(results.policies.critic, "critic"))
+        if results.policies.log_std is not None:
+            arrays["log_std"] = results.policies.log_std
+    path = Path(folder) / f"{name}.npz"
+    with storage.atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, meta=np.array(json.dumps(meta)), **{k: np.asarray(v) for k, v in arrays.items()})
+    return path
+
+
+def _concat(parts: list[np.ndarray], dtype) -> np.ndarray:
+    return np.concatenate([np.asarray(p, dtype) for p in parts]) if parts else np.zeros(0, dtype)
+
+
+def load_job(folder: Path, name: str, identity: dict) -> Results | None:
+    """The results saved by :func:`save_job` as ``NAME`` for this ``identity``; None when there are none, they
+    were saved for another identity, or the file cannot be read (the job is then trained again)."""
+    path = Path(folder) / f"{name}.npz"
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            flat = {k: data[k] for k in data.files}
+        meta = json.loads(str(flat.pop("meta")))
+        if meta.get("format") != FORMAT or meta.get("version") != VERSION or meta["identity"] != _plain(identity):
+            return None
+        return _results(meta, flat)
+    except Exception:  # zipfile.BadZipFile, EOFError, OSError, KeyError, ValueError, ConfigError: train it again
+        return None
+
+
+def _results(meta: dict, flat: dict[str, np.ndarray]) -> Results:
+    """Rebuilds the :class:`Results` that :func:`save_job` wrote, array for array."""
+    bounds = np.concatenate([[0], np.cumsum(flat["episode_counts"])])
+    episodes = [Episodes(flat["episode_timestep"][a:b], flat["episode_ret"][a:b], flat["episode_length"][a:b])
+                for a, b in zip(bounds[:-1], bounds[1:])]
+    policies = None
+    if meta["env"] is not None:
+        env = storage.from_dict(EnvInfo, meta["env"], "env")
+        policies = Policies(env, storage._unflatten(flat, "actor"), storage._unflatten(flat, "critic"),
+                            flat["log_std"] if meta["log_std"] else None)
+    return Results(env_id=meta["env_id"], total_timesteps=meta["total_timesteps"],
+                   timesteps_per_iteration=meta["timesteps_per_iteration"], seeds=flat["seeds"],
+                   phi={k: flat[f"phi/{k}"] for k in meta["phi"]}, learning_rate=flat["learning_rate"],
+                   episodes=episodes, finite=flat["finite"],
+                   metrics={k: flat[f"metrics/{k}"] for k in meta["metrics"]},
+                   compile_s=meta["compile_s"], train_s=meta["train_s"], policies=policies)

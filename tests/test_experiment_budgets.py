@@ -1,0 +1,192 @@
+"""`ermrl experiment run`'s test budgets (--test-seeds, --test-timesteps, --test-lrs, also from --config) and a
+test phase that resumes model by model: one smoke study of CartPoleNoVel on the JAX backend, evolved once."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import optuna
+import pytest
+from optuna.trial import TrialState
+
+from ermrl.cli import main
+from ermrl.evolution.study import load_study
+from ermrl.experiments import checkpoints, registry, runner
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+EXPERIMENT, STUDY = "partial-observability", "cartpole-1res"
+BUDGET = runner.TestBudget(seeds=2, timesteps=4096, ermrl_lrs=(1e-4, 3e-4))
+FLAGS = ["--test-seeds", "2", "--test-timesteps", "4096", "--test-lrs", "1e-4", "3e-4"]
+RUN = ["experiment", "run", EXPERIMENT, "--only", STUDY, "--scale", "smoke", "--quiet", "--no-estimate"]
+
+
+def cli(*args):
+    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, timeout=900)
+
+
+def run_in_process(folder, log, progress=None, budget=BUDGET):
+    return runner.run_experiment(registry.get(EXPERIMENT), registry.get_scale("smoke"), folder, only=(STUDY,),
+                                 log=log, progress=progress, budget=budget)
+
+
+def trials(folder):
+    study = load_study(runner.default_storage(folder), f"{EXPERIMENT}-smoke-{STUDY}")
+    return [(t.number, t.state, t.value, t.datetime_complete) for t in study.trials], study.user_attrs["selection"]
+
+
+@pytest.fixture(scope="module")
+def evolved(tmp_path_factory):
+    """The study evolved, selected and tested by the CLI with the budget flags, uninterrupted."""
+    folder = tmp_path_factory.mktemp("evolved")
+    r = cli(*RUN, "--out", str(folder), *FLAGS)
+    assert r.returncode == 0, r.stderr
+    return folder
+
+
+@pytest.fixture(scope="module")
+def interrupted(evolved, tmp_path_factory):
+    """A copy of ``evolved`` without its test phase, whose rerun was stopped (Ctrl-C) as the test phase's second
+    model (PPO) started, after the first (ER-MRL at both learning rates) had finished."""
+    folder = tmp_path_factory.mktemp("interrupted") / "run"
+    shutil.copytree(evolved, folder)
+    shutil.rmtree(folder / STUDY / "test")
+    started = []
+
+    def progress(label):
+        started.append(label)
+        if label.startswith("PPO"):
+            raise KeyboardInterrupt
+        return None
+
+    with pytest.raises(KeyboardInterrupt):
+        run_in_process(folder, lambda s: None, progress)
+    assert started[-2:] == ["ER-MRL", "PPO (same observation)"]
+    assert not (folder / STUDY / "test").exists()
+    assert sorted(p.name for p in (folder / STUDY / "test.partial").iterdir()) == ["ermrl.npz", "settings.json"]
+    return folder
+
+
+def test_budget_flags_reach_the_test_phase_and_a_rerun_with_others_redoes_only_the_test(evolved, interrupted,
+                                                                                       tmp_path):
+    config = json.loads((evolved / STUDY / "test" / "test_config.json").read_text())
+    assert (config["seeds"], config["timesteps"], config["ermrl_lrs"], config["auc_steps"]) == (2, 4096, [1e-4, 3e-4],
+                                                                                                4096)
+    rows = json.loads((evolved / STUDY / "test" / "summary.json").read_text())
+    assert [(r["model"].split(" (")[0], r["n_seeds"], r["timesteps"]) for r in rows] == [
+        ("ER-MRL lr 0.0001", 2, 4096), ("ER-MRL lr 0.0003", 2, 4096), ("PPO", 2, 4096), ("PPO", 2, 4096)]
+    record = load_study(runner.default_storage(evolved), f"{EXPERIMENT}-smoke-{STUDY}").user_attrs["ermrl"]
+    assert (record["seeds"], record["train"]["total_timesteps"]) == (1, 2048)  # the study's own budget, untouched
+
+    # the stopped run's rerun with 3 test seeds, given in a config file: the evolution and selection are kept, the
+    # finished model (trained for 2 seeds) is discarded, and the test phase is written for 3 seeds
+    folder = tmp_path / "run"
+    shutil.copytree(interrupted, folder)
+    before = trials(folder)
+    toml = tmp_path / "budgets.toml"
+    toml.write_text("test-seeds = 3\ntest-timesteps = 4096\ntest-lrs = [1e-4, 3e-4]\n")
+    r = cli(*RUN, "--out", str(folder), "--config", str(toml))
+    assert r.returncode == 0, r.stderr
+    assert "test on CartPoleNoVel-v1: 3 seeds × 4,096 steps, ER-MRL at lr 0.0001, 0.0003" in r.stdout
+    assert "test on CartPoleNoVel-v1: discarded the models of an unfinished test phase with other settings" in r.stdout
+    assert "from an earlier run" not in r.stdout
+    assert trials(folder) == before
+    config = json.loads((folder / STUDY / "test" / "test_config.json").read_text())
+    assert (config["seeds"], config["timesteps"], config["ermrl_lrs"]) == (3, 4096, [1e-4, 3e-4])
+    assert [r["n_seeds"] for r in json.loads((folder / STUDY / "test" / "summary.json").read_text())] == [3] * 4
+    assert not (folder / STUDY / "test.partial").exists()
+
+
+def test_a_stopped_test_phase_keeps_its_finished_models_and_ends_as_an_uninterrupted_one(evolved, interrupted,
+                                                                                        tmp_path):
+    folder = tmp_path / "run"
+    shutil.copytree(interrupted, folder)
+    logs, started = [], []
+    run_in_process(folder, logs.append, lambda label: started.append(label))
+    kept = [line for line in logs if "from an earlier run" in line]
+    assert len(kept) == 1 and kept[0].startswith("    test on CartPoleNoVel-v1: kept ER-MRL lr 0.0001 (sr ")
+    assert "ER-MRL lr 0.0003 (sr " in kept[0]
+    assert "ER-MRL" not in started and started[-2:] == ["PPO (same observation)", "PPO (full observation)"]
+    assert not (folder / STUDY / "test.partial").exists()
+
+    ours, theirs = folder / STUDY / "test", evolved / STUDY / "test"
+    for name in ("summary.json", "summary.csv", "curves.csv", "test_config.json"):
+        assert (ours / name).read_bytes() == (theirs / name).read_bytes(), name
+    rows = json.loads((ours / "summary.json").read_text())
+    assert all(len(r["per_seed"]) == 2 and None not in r["per_seed"] for r in rows)
+    agents = sorted(p.relative_to(theirs) for p in theirs.rglob("*.npz"))
+    assert len(agents) == 8 and sorted(p.relative_to(ours) for p in ours.rglob("*.npz")) == agents
+    for path in agents:
+        with np.load(ours / path) as a, np.load(theirs / path) as b:
+            assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files), path
+
+
+def test_the_kept_model_reads_back_as_trained_and_is_refused_when_damaged_or_for_other_agents(evolved, interrupted,
+                                                                                             tmp_path):
+    """The stopped run's ER-MRL model (both learning rates) reads back with the per-seed scores of the uninterrupted
+    run; a copy cut short, or asked for with another population, is not trusted (None: trained again)."""
+    kept = interrupted / STUDY / "test.partial" / "ermrl.npz"
+    with np.load(kept) as data:
+        identity = json.loads(str(data["meta"]))["identity"]
+    results = checkpoints.load_job(kept.parent, "ermrl", identity)
+    rows = json.loads((evolved / STUDY / "test" / "summary.json").read_text())
+    assert list(results.seeds) == [1000, 1001, 1000, 1001] and results.policies is not None
+    assert results.fitness().tolist() == rows[0]["per_seed"] + rows[1]["per_seed"]
+    assert checkpoints.load_job(kept.parent, "ermrl", {**identity, "seeds": [1000, 1001, 1002] * 2}) is None
+    cut = tmp_path / "ermrl.npz"
+    cut.write_bytes(kept.read_bytes()[:1000])
+    assert checkpoints.load_job(tmp_path, "ermrl", identity) is None
+
+
+BAD = [
+    (["--test-seeds", "0"], "--test-seeds must be >= 1, got 0"),
+    (["--test-timesteps", "-5"], "--test-timesteps must be >= 1, got -5"),
+    (["--test-lrs", "3e-4", "1.5"], "--test-lrs: learning rate 1.5 is outside (0, 1); the paper uses 3e-4 or 1e-4"),
+    (["--test-lrs", "0"], "--test-lrs: learning rate 0 is outside (0, 1); the paper uses 3e-4 or 1e-4"),
+    (["--test-lrs", "1e-4", "1e-4"], "--test-lrs gives 0.0001 twice; give each learning rate once"),
+    (["--test-seeds", "two"], "argument --test-seeds: invalid int value: 'two'; see `ermrl experiment run --help`"),
+    (["--test-lrs"], "argument --test-lrs: expected at least one argument; see `ermrl experiment run --help`"),
+]
+
+
+@pytest.mark.parametrize("flags,message", BAD, ids=[" ".join(f) for f, _ in BAD])
+def test_bad_test_budgets_are_one_line_errors_before_any_work(flags, message, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main([*RUN, "--out", str(out), *flags]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == f"ermrl experiment: error: {message}\n" and captured.out == ""
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("text,message", [
+    ("test-seeds = 0\n", "--test-seeds must be >= 1, got 0"),
+    ("test-lrs = []\n", "config file {path}: test-lrs takes at least one value, got an empty list"),
+    ("test-timesteps = 1.5\n", "config file {path}: test-timesteps must be an integer, got 1.5"),
+])
+def test_bad_test_budgets_in_a_config_file_are_one_line_errors(text, message, tmp_path, capsys):
+    path, out = tmp_path / "budgets.toml", tmp_path / "run"
+    path.write_text(text)
+    assert main([*RUN, "--out", str(out), "--config", str(path)]) == 2
+    assert capsys.readouterr().err == f"ermrl experiment: error: {message.format(path=path)}\n"
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("scale", list(registry.SCALES))
+def test_budgets_override_every_test_phase_and_the_estimate_but_no_study(scale, tmp_path):
+    experiment, s = registry.get(EXPERIMENT), registry.get_scale(scale)
+    budget = runner.TestBudget(seeds=10, timesteps=3_000_000, ermrl_lrs=(1e-4,))
+    plain, plans = runner.plan(experiment, s, tmp_path), runner.plan(experiment, s, tmp_path, budget=budget)
+    assert [p.config for p in plans] == [p.config for p in plain]
+    for p in plans:
+        assert [(t.seeds, t.timesteps, t.ermrl_lrs, t.auc_steps, t.ppo_lr) for t in p.tests] == [
+            (10, 3_000_000, (1e-4,), 300_000, p.spec.ppo_lr)]
+    assert [p.tests[0].timesteps for p in runner.plan(experiment, s, tmp_path, budget=runner.TestBudget(seeds=4))] \
+        == [s.long_test_timesteps if p.spec.long_test else s.test_timesteps for p in plain]
+    # the estimate counts the test phases at the budget's size (JAX envs: nominal rate; NoVel: 3 models here)
+    jax_only = lambda ps: [p for p in ps if not p.spec.envs[0].startswith("LunarLander")]
+    extra = runner.estimate_seconds(jax_only(plans)) - runner.estimate_seconds(jax_only(plain))
+    expected = sum(3 * 10 * 3_000_000 - (len(t.ermrl_lrs) + 2) * t.seeds * t.timesteps
+                   for p in jax_only(plain) for t in p.tests) / runner.JAX_RATE
+    assert extra == pytest.approx(expected)
