@@ -297,7 +297,8 @@ def cmd_evolve(args) -> int:
     config = dataclasses.replace(config, baselines=stored.baselines)  # a resumed study keeps its constants
     done = count(study, optuna.trial.TrialState.COMPLETE)
     print(f"study {name!r} in {shown_url(storage_url)}: {done}/{args.trials} trials done, "
-          f"{config.generation_size} per generation × {args.seeds} seeds × {args.timesteps:,} steps" + (f" on {len(env_ids)} envs" if config.normalized else ""))
+          f"{config.generation_size} per generation × {args.seeds} seeds × {args.timesteps:,} steps"
+          + (f" on {len(env_ids)} envs" if config.normalized else ""))
     trainers = make_trainers(config)
     if done < args.trials and not args.no_estimate:
         batch = min(worker.batch or config.generation_size, args.trials - done)

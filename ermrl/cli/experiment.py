@@ -63,7 +63,7 @@ def _run(args) -> int:
 
     from ermrl import envs, storage
     from ermrl.cli.commands import _bars
-    from ermrl.evolution.study import make_storage
+    from ermrl.evolution.study import make_storage, shown_url
     from ermrl.experiments import registry, runner
 
     experiment, scale = registry.get(args.name), registry.get_scale(args.scale)
@@ -97,7 +97,8 @@ def _run(args) -> int:
             done[p.study] = len(study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,)))
         except KeyError:
             pass
-    print(f"experiment {experiment.name} at {scale.name} scale: {len(plans)} studies in {folder} (storage {url})")
+    print(f"experiment {experiment.name} at {scale.name} scale: {len(plans)} studies in {folder} "
+          f"(storage {shown_url(url)})")
     if not args.no_estimate:
         print(f"estimated time: {runner.estimate_seconds(plans, done) / 60:.0f} min (rough: nominal throughput, "
               f"{sum(done.values())} trials already done)")
