@@ -1,0 +1,83 @@
+#!/usr/bin/env bash
+# The runs behind docs/paper.md, in order. Every step resumes where it stopped (studies, selections and each
+# test-phase model are kept), so run it again after any stop. Steps can be named: `reproduce_paper.sh pendulum h2`.
+# Studies go to journal files under docs/data/ (committed); test phases to runs/experiments/, and their small
+# files (summary, curves, settings, figure) are copied beside the journal by `collect` after each step.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+E=${ERMRL:-.venv/bin/ermrl}
+REF=${REF_PYTHON:-.venv-ref/bin/python}
+TEST10=(--test-seeds 10 --test-timesteps 1000000)
+
+# collect EXPERIMENT-SCALE: copy each study's test-phase results (not the saved agents) under docs/data/.
+collect() {
+  local src=runs/experiments/$1 dst=docs/data/$1
+  [ -d "$src" ] || return 0
+  find "$src" -path '*/agents' -prune -o -path '*.partial' -prune -o -type f \
+      \( -name summary.json -o -name summary.csv -o -name curves.csv -o -name test_config.json \
+         -o -name test_phase.png -o -name 'report.*' -o -name selection.json \) -print |
+    while read -r f; do mkdir -p "$dst/$(dirname "${f#"$src"/}")"; cp "$f" "$dst/${f#"$src"/}"; done
+}
+
+run() {  # run EXPERIMENT SCALE ARGS...: one experiment at one scale, its journal under docs/data/
+  local name=$1 scale=$2; shift 2
+  "$E" experiment run "$name" --scale "$scale" --storage "docs/data/$name-$scale/studies.log" \
+      --out "runs/experiments/$name-$scale" "$@"
+  collect "$name-$scale"
+}
+
+step_cartpole() {  # H1: the paper-scale study (900 trials), selection, test 10 × 1M at 3 learning rates
+  run partial-observability paper --only cartpole-1res
+}
+step_pendulum() {  # H1: PendulumNoVel, small evolution, test 10 × 1M
+  run partial-observability small --only pendulum-1res "${TEST10[@]}"
+}
+step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution, test 10 × 3M at lr 1e-4
+  run partial-observability small --only lunarlander-2res --test-seeds 10 --test-timesteps 3000000 --test-lrs 1e-4
+}
+step_h2() {  # H2: Ant, HalfCheetah, Swimmer with 2 reservoirs, small evolution, test 10 × 1M against PPO
+  run locomotion small --only ant-2res halfcheetah-2res swimmer-2res "${TEST10[@]}"
+}
+step_fft() {  # H2: the rhythm of the test phases' ER-MRL and PPO agents
+  for s in ant halfcheetah swimmer; do
+    local t=runs/experiments/locomotion-small/$s-2res/test/agents
+    mkdir -p docs/data/locomotion-small/fft
+    "$E" analyze fft "$t/ermrl" "$t/ppo" --max-steps 1000 --out "docs/data/locomotion-small/fft/$s.png"
+  done
+}
+step_h3() {  # H3: evolved on two of Ant/HalfCheetah/Swimmer, tested on the third (10 × 1M)
+  run generalization-morphology small "${TEST10[@]}"
+}
+step_humanoid() {  # H3: Humanoid <-> HumanoidStandup, small evolution and test
+  run generalization-humanoid small
+}
+step_hpmap() {  # H3 / appendix: the top Φ of the locomotion studies on sr × lr
+  "$E" analyze hp-map locomotion-small-ant-2res locomotion-small-halfcheetah-2res locomotion-small-swimmer-2res \
+      --storage docs/data/locomotion-small/studies.log --out docs/data/locomotion-small/hp_map.png
+}
+step_peer() {  # peer agreement: the CartPole Φ* trained by SB3 + ReservoirPy (ReservoirPy 0.3's bias), 4 × 300k
+  local phi
+  phi=$(.venv/bin/python - <<'PY'
+from ermrl import storage
+from ermrl.evolution.selection import chosen_trial
+from ermrl.evolution.study import ATTR, load_study
+
+study = load_study("docs/data/partial-observability-paper/studies.log", "partial-observability-paper-cartpole-1res")
+trial, phi, how = chosen_trial(study, storage.decode_study_record(study.user_attrs[ATTR]), None)
+print(f"--sr {float(phi.sr[0])!r} --lr {float(phi.lr[0])!r} --iss {float(phi.iss[0])!r}")
+PY
+)
+  # shellcheck disable=SC2086
+  "$REF" benchmarks/reference_pipeline.py --agents 4 --timesteps 300000 --procs 2 $phi --bias bernoulli \
+      --json docs/data/partial-observability-paper/peer_reference.json
+}
+
+steps=("$@")
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum lunarlander h2 fft h3 humanoid hpmap peer)
+for s in "${steps[@]}"; do
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum lunarlander h2 fft h3 humanoid hpmap peer" >&2; exit 2; }
+done
+for s in "${steps[@]}"; do
+  echo "== $s ($(date -u +%H:%M:%S))"
+  "step_$s"
+done
