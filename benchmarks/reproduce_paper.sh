@@ -32,6 +32,9 @@ step_cartpole() {  # H1: the paper-scale study (900 trials), selection, test 10 
 step_pendulum() {  # H1: PendulumNoVel, small evolution, test 10 × 1M
   run partial-observability small --only pendulum-1res "${TEST10[@]}"
 }
+step_pendulum_medium() {  # H1: the same at the paper's per-trial budget (small's 50k-step trials select noise there)
+  run partial-observability medium --only pendulum-1res
+}
 step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution, test 10 × 3M at lr 1e-4
   run partial-observability small --only lunarlander-2res --test-seeds 10 --test-timesteps 3000000 --test-lrs 1e-4
 }
@@ -73,9 +76,9 @@ PY
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum lunarlander h2 fft h3 humanoid hpmap peer)
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium lunarlander h2 fft h3 humanoid hpmap peer)
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum lunarlander h2 fft h3 humanoid hpmap peer" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium lunarlander h2 fft h3 humanoid hpmap peer" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"

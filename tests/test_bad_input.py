@@ -287,7 +287,8 @@ CASES = [
     ("experiment run partial-observabilty", "ermrl experiment: error: unknown experiment 'partial-observabilty'; did "
                                             "you mean partial-observability? (`ermrl experiment list` names them all)"),
     ("experiment run partial-observability --scale huge",
-     "ermrl experiment: error: argument --scale: invalid choice: 'huge' (choose from 'smoke', 'small', 'paper'); see "
+     "ermrl experiment: error: argument --scale: invalid choice: 'huge' (choose from 'smoke', 'small', 'medium', "
+     "'paper'); see "
      "`ermrl experiment run --help`"),
     ("experiment run partial-observability --only cartpole1res",
      "ermrl experiment: error: experiment partial-observability has no study 'cartpole1res'; its studies: "

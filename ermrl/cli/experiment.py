@@ -21,8 +21,9 @@ def add_parser(sub, formatter) -> None:
     lst.add_argument("--config", type=Path, default=None, help=argparse_hidden())
     run = esub.add_parser("run", help="run (or resume) one experiment", formatter_class=formatter)
     run.add_argument("name", help="experiment name (see `ermrl experiment list`)")
-    run.add_argument("--scale", default="small", choices=["smoke", "small", "paper"],
-                     help="budgets: smoke (seconds a study, for tests), small (a first answer here), paper")
+    run.add_argument("--scale", default="small", choices=["smoke", "small", "medium", "paper"],
+                     help="budgets: smoke (seconds a study, for tests), small (a first answer here), medium (the "
+                          "paper's trial budget, 60 trials), paper (`ermrl experiment list` gives each one's numbers)")
     run.add_argument("--only", nargs="+", default=(), metavar="STUDY", help="run only these studies of the experiment")
     run.add_argument("--storage", default=None,
                      help="Optuna storage URL or journal file for every study (default a journal file in the folder)")

@@ -1,7 +1,10 @@
 """The paper's experiments by name, each a set of studies (evolve, select, test) at one of three scales.
 
-``smoke`` checks the wiring in seconds per study; ``small`` gives a first answer on this machine; ``paper``
-uses the paper's budgets (900 trials, 3 seeds × 300k steps, test 10 seeds × 1M steps, 3M for LunarLander).
+``smoke`` checks the wiring in seconds per study; ``small`` gives a first answer on this machine (a trend: its
+50k-step trials are too short for tasks that PPO learns slowly, such as Pendulum, where every trial scores like
+a random agent and the evolution selects noise); ``medium`` keeps the paper's per-trial budget (3 seeds × 300k
+steps) with 60 trials; ``paper`` uses the paper's budgets (900 trials, 3 seeds × 300k steps, test 10 seeds × 1M
+steps, 3M for LunarLander).
 """
 
 from __future__ import annotations
@@ -82,6 +85,10 @@ SCALES = {
                    test_seeds=5, test_timesteps=200_000, long_test_timesteps=500_000,
                    description="18 trials (2–3 CMA-ES generations), 2 seeds × 50k; select the top 3 on 3 seeds; "
                                "test 5 seeds × 200k (LunarLander 500k)"),
+    "medium": Scale("medium", trials=60, seeds=3, timesteps=300_000, popsize=None, select_top=5, select_seeds=5,
+                     test_seeds=10, test_timesteps=1_000_000, long_test_timesteps=3_000_000,
+                     description="60 trials with the paper's per-trial budget (3 seeds × 300k); select the top 5 on "
+                                 "5 seeds; test 10 seeds × 1M (LunarLander 3M)"),
     "paper": Scale("paper", trials=900, seeds=3, timesteps=300_000, popsize=None, select_top=5, select_seeds=5,
                    test_seeds=10, test_timesteps=1_000_000, long_test_timesteps=3_000_000,
                    description="the paper: 900 trials, 3 seeds × 300k; test 10 seeds × 1M (LunarLander 3M)"),
