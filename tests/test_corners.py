@@ -155,7 +155,7 @@ def test_the_tell_path_records_a_reason_for_every_trial_that_is_not_a_number():
     assert set(SPACE.suggest(next_trial)._asdict()) == {"sr", "lr", "iss"}
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)])
 def test_the_spectral_radius_of_1000_units_is_sr_to_float32_precision(seed):
     """``generate`` normalizes W to radius 1 in float64 and stores it in float32; ``scale`` multiplies by sr in
     float32 inside JAX. The radius of the matrix the agent uses, computed in float64, is sr to within 2^-23

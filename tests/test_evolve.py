@@ -150,7 +150,7 @@ def test_test_phase_and_report_from_a_tiny_study(tmp_path):
     (["--max-lr", "2"], "ermrl evolve: error: bad lr bounds [0.01, 2.0]: a leak rate is at most 1"),
     (["--sampler", "nsga"], "ermrl evolve: error: unknown sampler 'nsga'; choose one of cmaes, random, tpe"),
     (["--env", "Nope-v0"], "ermrl evolve: error: unknown env id 'Nope-v0'"),
-    (["--storage", "postgresql://u:p@127.0.0.1:9/db"], "ermrl evolve: error: cannot open storage 'postgresql://u:p@127.0.0.1:9/db'"),
+    (["--storage", "postgresql://u:p@127.0.0.1:9/db"], "ermrl evolve: error: cannot open storage 'postgresql://u:***@127.0.0.1:9/db'"),
     (["--storage", "nosuchdb://x"], "ermrl evolve: error: cannot open storage 'nosuchdb://x'"),
 ])
 def test_bad_evolve_flags(args, message, tmp_path):

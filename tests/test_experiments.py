@@ -170,10 +170,17 @@ def run_smoke(name, tmp_path, only=()):
     return report
 
 
-@pytest.mark.parametrize("name", list(registry.EXPERIMENTS))
+FAST_END_TO_END = ("partial-observability", "observed-units")
+"""Experiments whose first study runs end to end in the default suite (JAX envs, seconds). The others' first
+studies (MuJoCo host envs, two-env normalized fitness: 0.5–2 min each) run with `make test-slow`; their paths are
+covered in the default suite by the plan test above and the two-env test below."""
+
+
+@pytest.mark.parametrize("name", [n if n in FAST_END_TO_END else pytest.param(n, marks=pytest.mark.slow)
+                                  for n in registry.EXPERIMENTS])
 def test_every_experiment_runs_end_to_end_and_resumes(name, tmp_path):
-    """Every experiment name runs at smoke scale (the default suite runs each one's first study; `make test-slow`
-    runs all their studies, below)."""
+    """Every experiment name runs at smoke scale (each one's first study; `make test-slow` also runs all their
+    studies, below)."""
     first = registry.get(name).studies[0]
     text = run_smoke(name, tmp_path, only=(first.name,)).read_text()
     assert first.name in text and "P(improvement)" in text
