@@ -48,6 +48,14 @@ step_fft() {  # H2: the rhythm of the test phases' ER-MRL and PPO agents
     "$E" analyze fft "$t/ermrl" "$t/ppo" --max-steps 1000 --out "docs/data/locomotion-small/fft/$s.png"
   done
 }
+step_fft_early() {  # H2, C9 ("very early in the learning process"): Φ* and PPO trained 5 seeds × 100k, then the FFT
+  for s in ant halfcheetah swimmer; do
+    "$E" test --study "locomotion-small-$s-2res" --storage docs/data/locomotion-small/studies.log \
+        --out "runs/experiments/locomotion-small-early/$s" --seeds 5 --timesteps 100000
+    local t=runs/experiments/locomotion-small-early/$s/test/agents
+    "$E" analyze fft "$t/ermrl" "$t/ppo" --max-steps 1000 --out "docs/data/locomotion-small/fft/${s}_100k.png"
+  done
+}
 step_h3() {  # H3: evolved on two of Ant/HalfCheetah/Swimmer, tested on the third (10 × 1M)
   run generalization-morphology small "${TEST10[@]}"
 }
@@ -76,9 +84,9 @@ PY
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium lunarlander h2 fft h3 humanoid hpmap peer)
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium lunarlander h2 fft fft_early h3 humanoid hpmap peer)
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium lunarlander h2 fft h3 humanoid hpmap peer" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium lunarlander h2 fft fft_early h3 humanoid hpmap peer" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"
