@@ -91,6 +91,7 @@ def test_extreme_but_valid_phi_stays_finite():
     assert res.finite.all() and np.isfinite(res.fitness()).all()
 
 
+@pytest.mark.slow  # the default suite kills evolutions at 10 random points: test_crash_safety.py
 def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path):
     args = ["evolve", "--env", "CartPoleNoVel-v1", "--trials", "12", "--seeds", "2", "--timesteps", "61440",
             "--fixed-iss", "1.0", "--study", "r", "--out", str(tmp_path), "--quiet", "--no-estimate"]
