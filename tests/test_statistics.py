@@ -7,6 +7,10 @@ from rliable import library, metrics
 
 from ermrl.analysis import statistics
 
+# rliable calls arch with random_state, which arch deprecates; ermrl silences it (statistics._seeded), these
+# direct calls to rliable for reference values do not
+pytestmark = pytest.mark.filterwarnings("ignore:random_state is deprecated:FutureWarning")
+
 SCORES = np.random.default_rng(0).normal(100.0, 30.0, size=12)
 PNG = b"\x89PNG\r\n\x1a\n"
 
