@@ -67,8 +67,10 @@ demo: $(VENV)/.installed-base
 	$(BIN)/ermrl test --study demo --seeds 3 --timesteps 100000
 	$(BIN)/ermrl report --study demo
 
+# Two pytest workers (pytest-xdist), one per core of the CI machine: `make test TEST_WORKERS=4` on a bigger one.
+TEST_WORKERS ?= 2
 test: $(VENV)/.installed-test system-deps
-	$(BIN)/python -m pytest -q --durations=25
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --durations=25
 
 # Slow tests: the MuJoCo v4 smoke tests (and any long learning run marked slow).
 test-slow: $(VENV)/.installed-test

@@ -106,16 +106,32 @@ def _wait_for(predicate, what, timeout=300):
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def _freeze_while_training(study, proc, generation=1):
-    """Stops ``proc`` (SIGSTOP) at a moment it holds RUNNING trials; returns them (stable while it is stopped)."""
-    while True:
-        _wait_for(lambda: _holding(study, proc.pid, generation), f"worker pid {proc.pid} to train")
-        start = time.monotonic()
-        proc.send_signal(signal.SIGSTOP)
+def _training(study, procs, generation):
+    """(index, held) for the first worker of ``procs`` ({index: Popen}) holding RUNNING trials, else None. Fails at
+    once, instead of waiting out the timeout, when the study finished or every candidate exited first."""
+    for index, proc in procs.items():
         held = _holding(study, proc.pid, generation)
+        if held:
+            return index, held
+    done = len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
+    exited = {i: p.poll() for i, p in procs.items() if p.poll() is not None}
+    assert done < TRIALS and len(exited) < len(procs), (
+        f"no worker of {sorted(procs)} was seen training (study: {done} trials complete; exited: {exited})")
+    return None
+
+
+def _freeze_while_training(study, procs, generation=1):
+    """Stops (SIGSTOP) whichever worker of ``procs`` ({index: Popen}) is first seen holding RUNNING trials (in
+    ``generation`` or later; default: past the random startup), whatever share of the trials the scheduler gave each
+    worker; returns (index, its trials), stable while it is stopped."""
+    while True:
+        index, _ = _wait_for(lambda: _training(study, procs, generation), f"one of workers {sorted(procs)} to train")
+        start = time.monotonic()
+        procs[index].send_signal(signal.SIGSTOP)
+        held = _holding(study, procs[index].pid, generation)
         if held and time.monotonic() - start < 1.0:  # well within the grace period: nobody failed them yet
-            return held
-        proc.send_signal(signal.SIGCONT)  # it told them in between, or the machine is too slow right now
+            return index, held
+        procs[index].send_signal(signal.SIGCONT)  # it told them in between, or the machine is too slow right now
 
 
 def _opened(url, name):
@@ -126,22 +142,31 @@ def _opened(url, name):
 
 
 def test_killed_and_frozen_workers_are_replaced(postgres_url, tmp_path):
-    """Worker 1 is killed (SIGKILL) while it trains: on this machine its process is seen gone, and its trials
-    are failed ("interrupted") and redone. Worker 2 is frozen (SIGSTOP) while it trains, like a machine cut off:
-    its heartbeats stop, the others fail its trials after the grace period and redo them; thawed, it finds them
-    failed, drops their results with a log line, and goes on. The study ends with exactly --trials completed."""
+    """The first of three workers seen training past the startup generation is killed (SIGKILL): on this machine
+    its process is seen gone, and its trials are failed ("interrupted") and redone. The next one seen training is
+    frozen (SIGSTOP), like a machine cut off: its heartbeats stop, the survivor fails its trials after the grace
+    period and redoes them; thawed, it finds them failed, drops their results with a log line, and goes on. The
+    study ends with exactly --trials completed. (Which worker is which is left to the scheduler: on a loaded
+    machine one worker may get no trial past the startup at all.)"""
     procs = {i: start_worker(postgres_url, "faults", i, tmp_path, timesteps=8192) for i in range(3)}
     study = _wait_for(lambda: _opened(postgres_url, "faults"), "the study")
+    running = dict(procs)
     try:
-        killed = _freeze_while_training(study, procs[1])
-        procs[1].send_signal(signal.SIGKILL)
-        procs[1].wait()
-        frozen = _freeze_while_training(study, procs[2])
+        victim, killed = _freeze_while_training(study, running)
+        running.pop(victim).send_signal(signal.SIGKILL)
+        procs[victim].wait()
+        sleeper, frozen = _freeze_while_training(study, running)
         _wait_for(lambda: all(study._storage.get_trial(t._trial_id).state == TrialState.FAIL for t in frozen),
                   "the frozen worker's trials to be failed")
+    except BaseException:
+        for proc in procs.values():
+            proc.kill()
+        raise
     finally:
-        procs[2].send_signal(signal.SIGCONT)
-    results = finish({0: procs[0], 2: procs[2]}, tmp_path)
+        for proc in running.values():
+            proc.send_signal(signal.SIGCONT)
+    (survivor,) = set(running) - {sleeper}
+    results = finish(running, tmp_path)
     for i, (code, out, err) in results.items():
         assert code == 0 and "Traceback" not in err, f"worker {i}: {err}"
     trials, _ = check_study(study)
@@ -149,8 +174,8 @@ def test_killed_and_frozen_workers_are_replaced(postgres_url, tmp_path):
     assert {by_id[t._trial_id].user_attrs["failure"] for t in killed} == {"interrupted"}
     assert {by_id[t._trial_id].user_attrs["failure"] for t in frozen} == {LOST}
     for t in frozen:
-        assert f"trial {t.number} was failed meanwhile ({LOST})" in results[2][1]
-    assert f"trial {killed[0].number} failed: interrupted; it will be redone" in results[0][1] + results[2][1]
+        assert f"trial {t.number} was failed meanwhile ({LOST})" in results[sleeper][1]
+    assert f"trial {killed[0].number} failed: interrupted; it will be redone" in results[survivor][1] + results[sleeper][1]
     assert {t.user_attrs.get("failure") for t in trials if t.state == TrialState.FAIL} <= {"interrupted", LOST, FULL}
 
 
@@ -184,7 +209,7 @@ def test_sigterm_fails_the_workers_own_trials(postgres_url, tmp_path):
     url = postgres_url
     proc = start_worker(url, "term", 0, tmp_path, timesteps=8192)
     study = _wait_for(lambda: _opened(url, "term"), "the study")
-    held = _freeze_while_training(study, proc, generation=0)
+    _, held = _freeze_while_training(study, {0: proc}, generation=0)
     proc.send_signal(signal.SIGTERM)  # delivered when it runs again
     proc.send_signal(signal.SIGCONT)
     assert proc.wait(timeout=300) == 143
