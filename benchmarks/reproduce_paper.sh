@@ -66,8 +66,8 @@ step_hpmap() {  # H3 / appendix: the top Φ of the locomotion studies on sr × l
   "$E" analyze hp-map locomotion-small-ant-2res locomotion-small-halfcheetah-2res locomotion-small-swimmer-2res \
       --storage docs/data/locomotion-small/studies.log --out docs/data/locomotion-small/hp_map.png
 }
-step_peer() {  # peer agreement: the CartPole Φ* trained by SB3 + ReservoirPy (ReservoirPy 0.3's bias), 4 × 300k
-  local phi
+step_peer() {  # peer agreement: the CartPole Φ* trained 4 × 300k by SB3 + ReservoirPy and by ermrl, with either bias
+  local phi d=docs/data/partial-observability-paper/peer
   phi=$(.venv/bin/python - <<'PY'
 from ermrl import storage
 from ermrl.evolution.selection import chosen_trial
@@ -78,9 +78,18 @@ trial, phi, how = chosen_trial(study, storage.decode_study_record(study.user_att
 print(f"--sr {float(phi.sr[0])!r} --lr {float(phi.lr[0])!r} --iss {float(phi.iss[0])!r}")
 PY
 )
+  mkdir -p "$d"
+  for bias in bernoulli none; do  # each run is skipped once its result exists
+    # shellcheck disable=SC2086
+    [ -f "$d/reference-$bias.json" ] || "$REF" benchmarks/reference_pipeline.py --agents 4 --timesteps 300000 \
+        --procs 2 $phi --bias "$bias" --json "$d/reference-$bias.json"
+  done
   # shellcheck disable=SC2086
-  "$REF" benchmarks/reference_pipeline.py --agents 4 --timesteps 300000 --procs 2 $phi --bias bernoulli \
-      --json docs/data/partial-observability-paper/peer_reference.json
+  [ -f "$d/ermrl-bernoulli/summary.json" ] || "$E" train --env CartPoleNoVel-v1 $phi --seeds 4 --timesteps 300000 \
+      --no-save-agents --out "$d/ermrl-bernoulli"
+  # shellcheck disable=SC2086
+  [ -f "$d/ermrl-none-host/summary.json" ] || "$E" train --env CartPoleNoVel-v1 $phi --seeds 4 --timesteps 300000 \
+      --bias none --backend host --no-save-agents --out "$d/ermrl-none-host"
 }
 
 steps=("$@")

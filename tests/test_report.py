@@ -143,3 +143,30 @@ def test_report_embeds_the_analyses_it_finds(tmp_path):
     assert '<a href="test/videos/ermrl-seed1000.mp4">' in section
     assert doc.index("<h2>Analyses</h2>") < doc.index("<summary>Configuration</summary>")
     assert "<h2>Analyses</h2>" not in write_report(make_study(1), tmp_path / "bare").read_text()
+
+
+def test_running_time_counts_overlapping_trials_once_and_pauses_not_at_all(tmp_path):
+    """Trials at [0, 10] s and [5, 15] s (two workers), [20, 30] s, a failed one at [40, 42] s and one still running:
+    the study ran 15 + 10 + 2 = 27 s of its 42 s span; the report's first table shows both."""
+    import datetime as dt
+
+    from optuna.trial import FrozenTrial
+
+    from ermrl.analysis.report import running_time
+
+    study = make_study(1, n_complete=0, n_failed=0)
+    t0 = dt.datetime(2026, 11, 23, 8, 0, 0)
+    dist = {"sr": FloatDistribution(*SPACE["sr"], log=True)}
+    for number, (a, b, state) in enumerate([(0, 10, TrialState.COMPLETE), (5, 15, TrialState.COMPLETE),
+                                            (20, 30, TrialState.COMPLETE), (40, 42, TrialState.FAIL),
+                                            (41, None, TrialState.RUNNING)]):
+        study.add_trial(FrozenTrial(
+            number=number, state=state, value=100.0 + number if state == TrialState.COMPLETE else None,
+            values=None, datetime_start=t0 + dt.timedelta(seconds=a),
+            datetime_complete=None if b is None else t0 + dt.timedelta(seconds=b), params={"sr": 1.0},
+            distributions=dist, user_attrs={"phi": {"sr": [1.0], "lr": [0.5], "iss": [1.0]}, "generation": 0},
+            system_attrs={}, intermediate_values={}, trial_id=number))
+    assert running_time(study) == (27.0, 42.0)
+    text = write_report(study, tmp_path).read_text()
+    assert "<td>0:00:27</td><td>0:00:42</td>" in text.replace("\n", "")
+    assert running_time(make_study(1, n_complete=0, n_failed=0)) == (0.0, 0.0)

@@ -52,6 +52,31 @@ def ranked(study: optuna.Study) -> list[FrozenTrial]:
     return sorted(completed(study), key=lambda t: t.value, reverse=_maximize(study))
 
 
+def running_time(study: optuna.Study) -> tuple[float, float]:
+    """(running, span) in seconds over the finished trials (completed or failed): ``running`` is the time during
+    which at least one trial ran (the union of their [start, finish] intervals; overlapping workers count once),
+    ``span`` the time from the first start to the last finish. A study run in parts, with stops between them, has
+    running < span. (0, 0) before any trial finished."""
+    spans = sorted((t.datetime_start, t.datetime_complete) for t in study.get_trials(deepcopy=False)
+                   if t.datetime_start is not None and t.datetime_complete is not None)
+    if not spans:
+        return 0.0, 0.0
+    running, (start, end) = 0.0, spans[0]
+    for a, b in spans[1:]:
+        if a > end:
+            running += (end - start).total_seconds()
+            start, end = a, b
+        else:
+            end = max(end, b)
+    running += (end - start).total_seconds()
+    return running, (max(b for _, b in spans) - spans[0][0]).total_seconds()
+
+
+def _hms(seconds: float) -> str:
+    s = round(seconds)
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+
+
 def n_reservoirs(study: optuna.Study) -> int:
     return int(study.user_attrs.get("ermrl", {}).get("reservoirs", 1))
 
@@ -236,8 +261,9 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
     title = f"ER-MRL evolution: {', '.join(envs)}"
     parts = [f"<h1>{html.escape(title)}</h1>", f"<p>study <code>{html.escape(study.study_name)}</code></p>"]
     generations = {t.user_attrs["generation"] for t in study.trials if "generation" in t.user_attrs}
-    parts += [_table(["completed", "failed", "total", "generations"],
-                     [[len(done), len(bad), len(study.trials), len(generations)]])]
+    running, span = running_time(study)
+    parts += [_table(["completed", "failed", "total", "generations", "running time", "first start to last finish"],
+                     [[len(done), len(bad), len(study.trials), len(generations), _hms(running), _hms(span)]])]
     if not done:
         parts.append('<p class="warn">no completed trial yet</p>')
 
