@@ -36,10 +36,12 @@ POPSIZE, TRIALS = 6, 24
 LOST = "worker lost (no heartbeat for 3 s)"
 
 
-def start_worker(url, study, index, folder, timesteps=2048, batch=2):
+def start_worker(url, study, index, folder, timesteps=2048, batch=2, grace=3):
+    """One `ermrl evolve` process. A short grace period (3 s) makes lost workers quick to see; tests where no worker
+    is lost take a long one, so that a worker starved of CPU by the other tests never looks lost."""
     args = ["evolve", "--env", "CartPoleNoVel-v1", "--units", "10", "--seeds", "1", "--timesteps", str(timesteps),
             "--fixed-iss", "1.0", "--popsize", str(POPSIZE), "--trials", str(TRIALS), "--batch", str(batch),
-            "--worker-index", str(index), "--heartbeat-interval", "1", "--grace-period", "3",
+            "--worker-index", str(index), "--heartbeat-interval", "1", "--grace-period", str(grace),
             "--storage", url, "--study", study, "--quiet", "--no-estimate"]
     out, err = open(folder / f"worker{index}.out", "w"), open(folder / f"worker{index}.err", "w")
     return subprocess.Popen([sys.executable, "-m", "ermrl.cli", *args], stdout=out, stderr=err, cwd=folder)
@@ -79,7 +81,7 @@ def check_study(study):
 
 
 def test_three_workers_share_one_study(postgres_url, tmp_path):
-    procs = {i: start_worker(postgres_url, "three", i, tmp_path) for i in range(3)}
+    procs = {i: start_worker(postgres_url, "three", i, tmp_path, grace=60) for i in range(3)}
     results = finish(procs, tmp_path)
     for i, (code, out, err) in results.items():
         assert code == 0 and "Traceback" not in err, f"worker {i}: {err}"
