@@ -66,6 +66,17 @@ step_hpmap() {  # H3 / appendix: the top Φ of the locomotion studies on sr × l
   "$E" analyze hp-map locomotion-small-ant-2res locomotion-small-halfcheetah-2res locomotion-small-swimmer-2res \
       --storage docs/data/locomotion-small/studies.log --out docs/data/locomotion-small/hp_map.png
 }
+step_probe() {  # H1, C4: velocity R² of each H1 study's Φ* (1 reservoir), against the default Φ and a memoryless one
+  local spec env data study name
+  for spec in CartPoleNoVel-v1:partial-observability-paper:cartpole-1res:cartpole \
+              PendulumNoVel-v1:partial-observability-small:pendulum-1res:pendulum \
+              PendulumNoVel-v1:partial-observability-medium:pendulum-1res:pendulum; do
+    IFS=: read -r env data study name <<<"$spec"
+    [ -f "docs/data/$data/studies.log" ] || continue  # that study has not run yet
+    "$E" analyze probe --env "$env" --study "$data-$study" --storage "docs/data/$data/studies.log" \
+        --out "docs/data/$data/probe/$name.png"
+  done
+}
 step_peer() {  # peer agreement: the CartPole Φ* trained 4 × 300k by SB3 + ReservoirPy and by ermrl, with either bias
   local phi d=docs/data/partial-observability-paper/peer
   phi=$(.venv/bin/python - <<'PY'
@@ -93,9 +104,9 @@ PY
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium lunarlander h2 fft fft_early h3 humanoid hpmap peer)
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium lunarlander probe h2 fft fft_early h3 humanoid hpmap peer)
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium lunarlander h2 fft fft_early h3 humanoid hpmap peer" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium lunarlander probe h2 fft fft_early h3 humanoid hpmap peer" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"
