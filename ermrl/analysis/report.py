@@ -53,12 +53,14 @@ def ranked(study: optuna.Study) -> list[FrozenTrial]:
 
 
 def running_time(study: optuna.Study) -> tuple[float, float]:
-    """(running, span) in seconds over the finished trials (completed or failed): ``running`` is the time during
-    which at least one trial ran (the union of their [start, finish] intervals; overlapping workers count once),
-    ``span`` the time from the first start to the last finish. A study run in parts, with stops between them, has
-    running < span. (0, 0) before any trial finished."""
+    """(running, span) in seconds over the completed trials: ``running`` is the time during which at least one of
+    them ran (the union of their [start, finish] intervals; overlapping workers count once), ``span`` the time from
+    the first start to the last finish. A study run in parts, with stops between them, has running < span. Failed
+    trials are left out: one failed by another worker after a stop ("worker lost") would span the stop. (0, 0)
+    before any trial completed."""
     spans = sorted((t.datetime_start, t.datetime_complete) for t in study.get_trials(deepcopy=False)
-                   if t.datetime_start is not None and t.datetime_complete is not None)
+                   if t.state == TrialState.COMPLETE and t.datetime_start is not None
+                   and t.datetime_complete is not None)
     if not spans:
         return 0.0, 0.0
     running, (start, end) = 0.0, spans[0]
