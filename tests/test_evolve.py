@@ -185,6 +185,9 @@ def test_journal_storage_persists_a_study(tmp_path):
     study.tell(trial, 12.5)
     again = load_study(url, "j")
     assert [t.value for t in again.trials] == [12.5]
+    size = Path(url).stat().st_size
+    open_study(url, "j", make_sampler("random", 6, 0), encode_study_record(config))  # resuming writes nothing
+    assert Path(url).stat().st_size == size
     assert again.user_attrs["ermrl"]["env_id"] == "CartPoleNoVel-v1"
     with pytest.raises(Exception, match="already exists with another config"):
         open_study(url, "j", make_sampler("random", 6, 0), encode_study_record(tiny(trials=1, space=SearchSpace())))

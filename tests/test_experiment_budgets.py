@@ -99,6 +99,27 @@ def test_budget_flags_reach_the_test_phase_and_a_rerun_with_others_redoes_only_t
     assert not (folder / STUDY / "test.partial").exists()
 
 
+def test_the_estimate_counts_only_the_test_phases_left(evolved, interrupted):
+    """A finished test phase is not estimated again (for the Φ* and budget it was written with); one removed, or
+    asked with another budget, is."""
+    def estimate(folder, budget):
+        (p,) = [p for p in runner.plan(registry.get(EXPERIMENT), registry.get_scale("smoke"), folder, budget=budget)
+                if p.spec.name == STUDY]
+        study = load_study(runner.default_storage(folder), p.study)
+        done = {p.study: len(study.get_trials(states=(TrialState.COMPLETE,)))}
+        left = runner.tests_left(p, study)
+        return p, left, runner.estimate_seconds([p], done, {p.study: left})
+
+    p, left, seconds = estimate(evolved, BUDGET)
+    assert left == () and seconds == 0
+    test_seconds = (len(BUDGET.ermrl_lrs) + 2) * BUDGET.seeds * BUDGET.timesteps / runner.JAX_RATE
+    assert runner.estimate_seconds([p], {p.study: p.config.trials}) == pytest.approx(runner.COMPILE_S + test_seconds)
+    p, left, seconds_left = estimate(interrupted, BUDGET)
+    assert left == p.tests and seconds_left == pytest.approx(runner.COMPILE_S + test_seconds)
+    p, left, _ = estimate(evolved, runner.TestBudget(seeds=3, timesteps=4096, ermrl_lrs=(1e-4, 3e-4)))
+    assert left == p.tests
+
+
 def test_a_stopped_test_phase_keeps_its_finished_models_and_ends_as_an_uninterrupted_one(evolved, interrupted,
                                                                                         tmp_path):
     folder = tmp_path / "run"

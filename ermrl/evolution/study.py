@@ -131,8 +131,11 @@ def open_study(storage_url: str, name: str, sampler, record: dict | None,
     worker of a study must have (see ``heartbeat.py``)."""
     storage = make_storage(storage_url, heartbeat)
     try:
-        study = optuna.create_study(storage=storage, study_name=name, sampler=sampler, direction="maximize",
-                                    load_if_exists=True)
+        try:  # load first: creating an existing study would append a (refused) creation to a journal file each time
+            study = optuna.load_study(study_name=name, storage=storage, sampler=sampler)
+        except KeyError:
+            study = optuna.create_study(storage=storage, study_name=name, sampler=sampler, direction="maximize",
+                                        load_if_exists=True)
     except Exception as e:
         raise ConfigError(f"cannot open study {name!r} in {shown_url(storage_url)!r} ({str(e).splitlines()[0]})") from None
     if record is not None:

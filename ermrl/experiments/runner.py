@@ -106,9 +106,27 @@ def _rate(env_id: str, backend: str) -> float:
     return min(2.0 / (step + 150e-6), JAX_RATE / 3)  # 2 cores; ~0.15 ms of JAX and IPC per step
 
 
-def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None) -> float:
-    """The experiment's remaining time, from nominal rates and the trials already completed."""
-    done = done or {}
+COMPILE_S = 60.0  # compiles of a study with work left: evolution, selection and the test models (15 s each)
+
+
+def tests_left(p: StudyPlan, study) -> tuple[TestConfig, ...]:
+    """The test phases of ``p`` not yet written for the study's current Φ* (all of them before a selection)."""
+    from ermrl.evolution.selection import load_selection
+    from ermrl.evolution.study import ATTR
+    from ermrl.experiments.evaluation import test_dir
+
+    sel = load_selection(study) if study is not None else None
+    if sel is None:
+        return p.tests
+    return tuple(t for t in p.tests
+                 if not _test_done(test_dir(p.run_dir, study.user_attrs[ATTR], t.env_id), t, sel.winner))
+
+
+def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
+                     left: dict[str, tuple[TestConfig, ...]] | None = None) -> float:
+    """The experiment's remaining time, from nominal rates, the trials already completed (``done``: study name ->
+    count) and the test phases still to run (``left``: study name -> :func:`tests_left`; default all)."""
+    done, left = done or {}, left or {}
     rates: dict[str, float] = {}
     total = 0.0
     for p in plans:
@@ -117,12 +135,13 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None)
         for env_id in c.env_ids:
             rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
             total += remaining * c.seeds * c.train.total_timesteps / rate
-        for t in p.tests:
+        for t in left.get(p.study, p.tests):
             env_id = t.env_id or c.env_ids[0]
             rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
             models = len(t.ermrl_lrs) + 1 + (1 if "NoVel" in env_id else 0)
             total += models * t.seeds * t.timesteps / rate
-    return total + 15.0 * len(plans) * 4  # compiles: evolution, selection and the test models
+    busy = sum(1 for p in plans if done.get(p.study, 0) < p.config.trials or left.get(p.study, p.tests))
+    return total + COMPILE_S * busy
 
 
 def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_url: str | None = None,
