@@ -90,17 +90,27 @@ print(f"--sr {float(phi.sr[0])!r} --lr {float(phi.lr[0])!r} --iss {float(phi.iss
 PY
 )
   mkdir -p "$d"
-  for bias in bernoulli none; do  # each run is skipped once its result exists
+  for bias in bernoulli none; do  # 10 seeds in two parts (0-3, then 4-9); each part is skipped once it exists
     # shellcheck disable=SC2086
     [ -f "$d/reference-$bias.json" ] || "$REF" benchmarks/reference_pipeline.py --agents 4 --timesteps 300000 \
         --procs 2 $phi --bias "$bias" --json "$d/reference-$bias.json"
+    # shellcheck disable=SC2086
+    [ -f "$d/reference-$bias-4to9.json" ] || "$REF" benchmarks/reference_pipeline.py --agents 6 --first-seed 4 \
+        --timesteps 300000 --procs 2 $phi --bias "$bias" --json "$d/reference-$bias-4to9.json"
   done
+  # ermrl on the evolution's own seeds (0-3: 0, 1 and 2 scored the trial), then on 10 seeds no evolution used
   # shellcheck disable=SC2086
   [ -f "$d/ermrl-bernoulli/summary.json" ] || "$E" train --env CartPoleNoVel-v1 $phi --seeds 4 --timesteps 300000 \
       --no-save-agents --out "$d/ermrl-bernoulli"
   # shellcheck disable=SC2086
   [ -f "$d/ermrl-none-host/summary.json" ] || "$E" train --env CartPoleNoVel-v1 $phi --seeds 4 --timesteps 300000 \
       --bias none --backend host --no-save-agents --out "$d/ermrl-none-host"
+  # shellcheck disable=SC2086
+  [ -f "$d/ermrl-bernoulli-fresh/summary.json" ] || "$E" train --env CartPoleNoVel-v1 $phi --seeds 10 \
+      --first-seed 1000 --timesteps 300000 --no-save-agents --out "$d/ermrl-bernoulli-fresh"
+  # shellcheck disable=SC2086
+  [ -f "$d/ermrl-none-host-fresh/summary.json" ] || "$E" train --env CartPoleNoVel-v1 $phi --seeds 10 \
+      --first-seed 1000 --timesteps 300000 --bias none --backend host --no-save-agents --out "$d/ermrl-none-host-fresh"
 }
 
 steps=("$@")

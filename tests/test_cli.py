@@ -27,9 +27,11 @@ def test_train_writes_a_run_folder(tmp_path):
     assert (out / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
 
     plain = tmp_path / "plain"
-    r = ermrl("train", "--env", "CartPoleNoVel-v1", "--no-reservoir", "--seeds", "1", "--timesteps", "2048",
-              "--out", str(plain), "--quiet")
+    r = ermrl("train", "--env", "CartPoleNoVel-v1", "--no-reservoir", "--seeds", "1", "--first-seed", "1000",
+              "--timesteps", "2048", "--out", str(plain), "--quiet")
     assert r.returncode == 0, r.stderr
+    assert "seed 1000: fitness" in r.stdout and "seed 0:" not in r.stdout
+    assert json.loads((plain / "config.json").read_text())["population"]["seeds"] == [1000]
     figure = tmp_path / "both.png"
     r = ermrl("plot", str(out), str(plain), "--out", str(figure))
     assert r.returncode == 0, r.stderr
@@ -44,7 +46,7 @@ def test_help_explains_every_flag():
     assert top.returncode == 0 and "train" in top.stdout
     sub = ermrl("train", "--help")
     assert sub.returncode == 0
-    for flag in ("--env", "--units", "--sr", "--lr", "--iss", "--seeds", "--timesteps", "--no-reservoir", "--ppo-lr",
+    for flag in ("--env", "--units", "--sr", "--lr", "--iss", "--seeds", "--first-seed", "--timesteps", "--no-reservoir", "--ppo-lr",
                  "--out", "--reservoirs", "--feed-action", "--skip-connection", "--observed-units", "--bias", "--preset",
                  "--backend", "--env-workers"):
         assert flag in sub.stdout, flag
@@ -58,6 +60,7 @@ def test_help_explains_every_flag():
     (["--sr", "-1"], "ermrl train: error: --sr must be positive and finite, got [-1.0]"),
     (["--reservoirs", "2", "--sr", "1", "2", "3"], "ermrl train: error: --sr got 3 values for 2 reservoirs; give one value or 2"),
     (["--ppo-lr", "3"], "ermrl train: error: learning rate 3.0 is outside (0, 1)"),
+    (["--first-seed", "-1"], "ermrl train: error: --first-seed must be >= 0, got -1"),
 ])
 def test_bad_input_is_one_line_and_exit_code_2(args, message, tmp_path):
     r = ermrl("train", *args, "--timesteps", "2048", cwd=tmp_path)

@@ -22,7 +22,9 @@ def add_parsers(sub, formatter) -> None:
         p.add_argument(f"--{name}", type=float, nargs="+", default=[default],
                        help={"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}[name]
                        + ", one value or one per reservoir")
-    p.add_argument("--seeds", type=int, default=3, help="number of seeds (0..N-1)")
+    p.add_argument("--seeds", type=int, default=3, help="number of seeds (FIRST..FIRST+N-1)")
+    p.add_argument("--first-seed", type=int, default=0, metavar="FIRST",
+                   help="the first seed: e.g. 1000 trains on seeds no evolution used (they use 0..S-1)")
     p.add_argument("--no-reservoir", action="store_true", help="plain PPO: the policy sees the observation")
     options.add_options(p, "env", "agent", "ppo", "model", "tensorboard", "agents")
     p.add_argument("--out", type=Path, default=None, help="run folder (default runs/train-ENV-TIME)")
@@ -194,6 +196,8 @@ def cmd_train(args) -> int:
         tensorboard.check_logdir(args.tensorboard)
     if args.seeds < 1:
         raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
+    if args.first_seed < 0:
+        raise ConfigError(f"--first-seed must be >= 0, got {args.first_seed}")
     if args.skip_connection and k == 0:
         raise ConfigError("--skip-connection feeds the observation beside a reservoir's context, but "
                           + ("--model lstm" if args.model == "lstm" else "--no-reservoir")
@@ -205,7 +209,8 @@ def cmd_train(args) -> int:
         recurrent.check(config)
     phi = Phi(*(np.array(_phi_values(n, getattr(args, n), max(k, 1))[: max(k, 1)], np.float32) for n in ("sr", "lr", "iss")))
     _check_phi(phi)
-    population = Population.grid(phi, args.seeds, config.ppo.learning_rate, k)
+    population = Population.grid(phi, list(range(args.first_seed, args.first_seed + args.seeds)),
+                                 config.ppo.learning_rate, k)
     label = "PPO-LSTM" if args.model == "lstm" else \
         "PPO" if k == 0 else f"ER-MRL ({k} reservoir{'s' if k > 1 else ''})"
     out = storage.check_folder(args.out or Path("runs") / f"train-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}")
