@@ -171,7 +171,7 @@ CASES = [
                                 "did you mean 'units'?"),
     ("train --config evolvekey.toml",
      "ermrl train: error: config file evolvekey.toml: unknown option 'trials' for `ermrl train`; options here: "
-     "backend, bias, env, env-workers, feed-action, iss, lr, lstm-hidden, lstm-seq-len, model, no-reservoir, "
+     "backend, bias, env, env-workers, feed-action, first-seed, iss, lr, lstm-hidden, lstm-seq-len, model, no-reservoir, "
      "observed-units, out, ppo-lr, preset, quiet, reservoirs, save-agents, seeds, skip-connection, sr, tensorboard, "
      "timesteps, units"),
     ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "
