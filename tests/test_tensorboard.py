@@ -105,7 +105,8 @@ def test_write_results_in_process(tmp_path):
 
 
 def test_test_phase_logs_every_model(tmp_path):
-    """`ermrl test --tensorboard` on a hand-made study: one run per model and seed, ep_rew_mean = curves.csv."""
+    """`ermrl test --tensorboard` on a hand-made study: one run per model and seed, ep_rew_mean = curves.csv, and the
+    PPO diagnostics under train/* as `ermrl train --tensorboard` writes them."""
     url = str(tmp_path / "s.log")
     space = SearchSpace(fixed_iss=1.0)
     config = EvolveConfig(train=TrainConfig(env_id="CartPole-v1", total_timesteps=2048), space=space, trials=2, seeds=2,
@@ -125,6 +126,13 @@ def test_test_phase_logs_every_model(tmp_path):
         assert steps == sorted(expected[model, seed])
         assert values == pytest.approx([expected[model, seed][s] for s in steps], rel=1e-5)
         assert logged["time/fps"][0] == [2048] and logged["time/fps"][1][0] > 0
+        # the same tags as `train --tensorboard`: episode lengths and the PPO update's diagnostics, one per update
+        assert {"rollout/ep_len_mean", "train/policy_gradient_loss", "train/value_loss", "train/entropy_loss",
+                "train/approx_kl", "train/clip_fraction"} <= set(logged)
+        assert logged["train/value_loss"][0] == [2048] and logged["train/value_loss"][1][0] > 0
+        assert logged["train/entropy_loss"][1][0] < 0  # minus the entropy of a 2-action policy
+        lengths = logged["rollout/ep_len_mean"][1]
+        assert all(8 <= v <= 500 for v in lengths)  # CartPole episodes: at least 8 steps, at most 500
     assert len(list(logs.iterdir())) == 4 and {s for _, s in expected} == {1000, 1001}
 
 

@@ -61,6 +61,12 @@ class Timings:
         self.elapsed_s[label] = timing.elapsed_s
         return timing
 
+    def of(self, label: str) -> list[float] | None:
+        """The update times of the population that trained the model ``label``: its own, or its first word's
+        (the ER-MRL models of several learning rates train as one population, "ER-MRL"); None when it did not
+        train here (e.g. kept from an earlier run)."""
+        return self.elapsed_s.get(label, self.elapsed_s.get(label.split(" ")[0]))
+
 
 def run_name(label: str, seed: int) -> str:
     """``<label>_seed<seed>`` with every run of characters other than letters, digits, '.', '-' replaced by '_'."""
@@ -136,20 +142,3 @@ def write_results(logdir: Path | str, results, label: str, elapsed_s=None) -> li
     """One run folder per agent of ``results`` (see the module doc); returns them in agent order."""
     steps, scalars = results_scalars(results, elapsed_s)
     return write_scalars(logdir, label, results.seeds, steps, scalars)
-
-
-def write_curves(logdir: Path | str, curves: dict, seeds, elapsed_s: dict | None = None) -> list[Path]:
-    """Run folders from learning curves already written (a test phase's curves.csv read back by
-    :func:`ermrl.storage.read_curves_csv`): ``rollout/ep_rew_mean`` and, when ``elapsed_s`` {name: (I,)} has the
-    model's label or its first word (the population it trained in), ``time/fps``.
-
-    ``curves`` {label: (steps (I,), values (S, I))}; ``seeds`` (S,), the same for every model."""
-    folders = []
-    for label, (steps, values) in curves.items():
-        scalars = {"rollout/ep_rew_mean": values}
-        timing = (elapsed_s or {}).get(label, (elapsed_s or {}).get(label.split(" ")[0]))
-        rate = fps(steps, timing) if timing is not None else None
-        if rate is not None:
-            scalars["time/fps"] = np.broadcast_to(rate, np.shape(values))
-        folders += write_scalars(logdir, label, seeds, steps, scalars)
-    return folders

@@ -351,7 +351,7 @@ def cmd_test(args) -> int:
     from ermrl.analysis import tensorboard
     from ermrl.analysis.statistics import format_ci
     from ermrl.evolution.study import ATTR, load_study
-    from ermrl.experiments.evaluation import FIRST_TEST_SEED, run_test_phase, test_dir
+    from ermrl.experiments.evaluation import run_test_phase, test_dir
 
     if args.tensorboard is not None:
         tensorboard.check_logdir(args.tensorboard)
@@ -365,13 +365,15 @@ def cmd_test(args) -> int:
     out = storage.check_folder(test_dir(_run_dir(args), study.user_attrs[ATTR], test.env_id))
     progress, close = _bars(args.quiet)
     timings = tensorboard.Timings(progress)  # the bars, and each population's update times for time/fps
+    models: list = []  # (label, Results) of every model, for TensorBoard
     try:
-        rows = run_test_phase(study, out, test, timings, save_agents=args.save_agents, log=print)
+        rows = run_test_phase(study, out, test, timings, save_agents=args.save_agents, log=print,
+                              on_results=lambda label, results: models.append((label, results)))
     finally:
         close()
-    if args.tensorboard is not None:  # from curves.csv: run_test_phase keeps its Results to itself
-        tensorboard.write_curves(args.tensorboard, storage.read_curves_csv(out / "curves.csv"),
-                                 range(FIRST_TEST_SEED, FIRST_TEST_SEED + test.seeds), timings.elapsed_s)
+    if args.tensorboard is not None:
+        for label, results in models:
+            tensorboard.write_results(args.tensorboard, results, label, timings.of(label))
     print(f"Φ*: {rows[0]['phi_choice']}; evolved on {', '.join(rows[0]['evolved_on'])}; tested on {rows[0]['env_id']}")
     for r in rows:
         div = f"  ({r['diverged']} diverged)" if r["diverged"] else ""

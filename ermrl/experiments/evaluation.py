@@ -118,7 +118,8 @@ def _phi_text(phi: Phi, k: int, trial: int) -> str:
 
 def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
                    progress: Callable[[str], Callable] | None = None, save_agents: bool = True,
-                   log: Callable[[str], None] | None = None) -> list[dict]:
+                   log: Callable[[str], None] | None = None,
+                   on_results: Callable[[str, object], None] | None = None) -> list[dict]:
     """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
     into ``out`` (checked before any training, written all at once at the end: :func:`ermrl.storage.staged_folder`),
     and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
@@ -128,7 +129,10 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
 
     Each trained model is kept in ``out.partial/`` until ``out`` is written (:mod:`ermrl.experiments.checkpoints`):
     a rerun after a stop loads the models finished for the same settings and Φ* instead of training them again,
-    telling ``log`` "kept MODEL from an earlier run"; the outputs are the same as those of an uninterrupted run."""
+    telling ``log`` "kept MODEL from an earlier run"; the outputs are the same as those of an uninterrupted run.
+
+    ``on_results(label, results)`` is called with each model's :class:`~ermrl.training.results.Results` (its
+    ``test.seeds`` agents), e.g. to write TensorBoard logs of its learning curves and PPO diagnostics."""
     config = storage.decode_study_record(study.user_attrs[ATTR])
     trial, phi, how = chosen_trial(study, config, test.trial)
     env_id = test.env_id or config.env_ids[0]
@@ -180,6 +184,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
             curves[label] = part.curves()
             seed_map[label] = part.seeds
             rows.append(summarize(label, kind, part, test.auc_steps))
+            if on_results is not None:
+                on_results(label, part)
             if save_agents:
                 agents.append((folders[label], train_config, part, label))
     _add_improvement(rows)
