@@ -15,6 +15,8 @@ Examples:
         --timesteps 20000 --procs 2 --json out.json
     python benchmarks/reference_pipeline.py --agents 4 --timesteps 300000 --sr 0.756 --lr 0.0886 --iss 1.0 \\
         --bias bernoulli
+    python benchmarks/reference_pipeline.py --agents 10 --first-seed 1000 --timesteps 300000 --sr 0.508 \\
+        --lr 0.0568 --bias bernoulli --weights ermrl      # SB3 on the reservoirs ermrl trained with those seeds
 """
 
 from __future__ import annotations
@@ -44,8 +46,12 @@ def check_deps() -> None:
         sys.exit(2)
 
 
-def make_env(name: str, seed: int, sr: float = 0.95, lr: float = 0.5, iss: float = 1.0, bias: str = "none"):
-    """Build the reservoir-wrapped env: CartPole-v1 without velocities, or a Gymnasium id as it is."""
+def make_env(name: str, seed: int, sr: float = 0.95, lr: float = 0.5, iss: float = 1.0, bias: str = "none",
+             weights: str = "reservoirpy"):
+    """Build the reservoir-wrapped env: CartPole-v1 without velocities, or a Gymnasium id as it is.
+
+    ``weights="ermrl"`` gives the reservoir ermrl's draw for ``seed`` (``ermrl.reservoir.generate``, scaled by sr and
+    iss) instead of ReservoirPy's, so that both stacks train on the very same reservoir (a paired peer check)."""
     import gymnasium as gym
     import numpy as np
     from reservoirpy.nodes import Reservoir
@@ -61,7 +67,15 @@ def make_env(name: str, seed: int, sr: float = 0.95, lr: float = 0.5, iss: float
                 rng = np.random.default_rng(seed)
                 b = np.zeros(100)
                 b[rng.choice(100, size=10, replace=False)] = rng.choice([-1.0, 1.0], size=10)
-            self.res = Reservoir(units=100, lr=lr, sr=sr, input_scaling=iss, bias=b, seed=seed)
+            if weights == "ermrl":  # ermrl's reservoir for this seed: (obs, one-hot or Box action, reward) inputs
+                from ermrl.reservoir import ReservoirSpec, generate
+
+                n_act = env.action_space.n if self.discrete else env.action_space.shape[0]
+                unit = generate(ReservoirSpec(bias=bias), seed, env.observation_space.shape[0] + n_act + 1)
+                self.res = Reservoir(lr=lr, W=sr * np.asarray(unit.W, np.float64),
+                                     Win=iss * np.asarray(unit.Win, np.float64), bias=np.asarray(unit.bias, np.float64))
+            else:
+                self.res = Reservoir(units=100, lr=lr, sr=sr, input_scaling=iss, bias=b, seed=seed)
             self.observation_space = gym.spaces.Box(-1.0, 1.0, (100,), np.float32)
 
         def _encode(self, action):
@@ -99,7 +113,7 @@ def make_env(name: str, seed: int, sr: float = 0.95, lr: float = 0.5, iss: float
 
 
 def train_one(env_name: str, seed: int, timesteps: int, phi: tuple[float, float, float],
-              bias: str = "none") -> tuple[float, float, int]:
+              bias: str = "none", weights: str = "reservoirpy") -> tuple[float, float, int]:
     """Worker: train one PPO agent on a reservoir with ``phi`` = (sr, lr, iss); return its wall time in seconds
     (learn() only), its fitness (mean return of its last 10 training episodes) and its episode count."""
     import torch
@@ -108,7 +122,7 @@ def train_one(env_name: str, seed: int, timesteps: int, phi: tuple[float, float,
     torch.set_num_threads(1)
     from stable_baselines3.common.monitor import Monitor
 
-    env = Monitor(make_env(env_name, seed, *phi, bias=bias))
+    env = Monitor(make_env(env_name, seed, *phi, bias=bias, weights=weights))
     model = PPO("MlpPolicy", env, seed=seed, device="cpu", verbose=0)
     t0 = time.perf_counter()
     model.learn(total_timesteps=timesteps)
@@ -130,6 +144,9 @@ def main(argv=None) -> int:
     p.add_argument("--bias", choices=("none", "bernoulli"), default="none",
                    help="the reservoir's bias: none (ReservoirPy 0.4) or bernoulli (0.3, the paper's, and ermrl's "
                         "default) (default: %(default)s)")
+    p.add_argument("--weights", choices=("reservoirpy", "ermrl"), default="reservoirpy",
+                   help="whose reservoir draw for each seed: ReservoirPy's, or ermrl's (the same reservoir ermrl "
+                        "trains on with that seed: a paired check of the two stacks) (default: %(default)s)")
     p.add_argument("--json", metavar="PATH", help="write the results as JSON to PATH")
     a = p.parse_args(argv)
     if a.agents < 1 or a.timesteps < 1 or a.procs < 1:
@@ -143,7 +160,8 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     with cf.ProcessPoolExecutor(max_workers=a.procs, mp_context=mp.get_context("spawn")) as pool:
         seeds = list(range(a.first_seed, a.first_seed + a.agents))
-        jobs = [pool.submit(train_one, a.env, s, a.timesteps, (a.sr, a.lr, a.iss), a.bias) for s in seeds]
+        jobs = [pool.submit(train_one, a.env, s, a.timesteps, (a.sr, a.lr, a.iss), a.bias, a.weights)
+                for s in seeds]
         per_agent, fitness, episodes = zip(*(j.result() for j in jobs))
     wall = time.perf_counter() - t0
 
@@ -152,7 +170,7 @@ def main(argv=None) -> int:
         "env": a.env, "agents": a.agents, "timesteps": a.timesteps, "procs": a.procs, "wall_s": wall,
         "agent_steps_per_s": a.agents * a.timesteps / wall,
         "per_agent_steps_per_s": [a.timesteps / t for t in per_agent],
-        "phi": {"sr": a.sr, "lr": a.lr, "iss": a.iss}, "bias": a.bias, "seeds": seeds,
+        "phi": {"sr": a.sr, "lr": a.lr, "iss": a.iss}, "bias": a.bias, "weights": a.weights, "seeds": seeds,
         "fitness": list(fitness), "episodes": list(episodes),
     }
     print(f"{a.env}: {a.agents} agents x {a.timesteps} steps, {a.procs} procs, wall {wall:.1f}s")

@@ -19,11 +19,35 @@ collect() {
     while read -r f; do mkdir -p "$dst/$(dirname "${f#"$src"/}")"; cp "$f" "$dst/${f#"$src"/}"; done
 }
 
+# stash EXPERIMENT-SCALE: keep the finished models of unfinished test phases (OUT.partial/, a few MB) beside the
+# journal, so that a run stopped with its checkout (a fresh machine has no runs/) resumes from the repository; a
+# stashed folder goes once its test phase is written. restore EXPERIMENT-SCALE: the reverse, before a run.
+stash() {
+  local src=runs/experiments/$1 dst=docs/data/$1 p rel
+  [ -d "$src" ] || return 0
+  while read -r p; do rel=${p#"$src"/}; rm -rf "$dst/$rel"; mkdir -p "$dst/$rel"; cp -p "$p"/* "$dst/$rel/"
+  done < <(find "$src" -type d -name '*.partial')
+  [ -d "$dst" ] || return 0
+  while read -r p; do rel=${p#"$dst"/}; [ -d "$src/$rel" ] || rm -rf "$p"
+  done < <(find "$dst" -type d -name '*.partial')
+}
+restore() {
+  local src=docs/data/$1 dst=runs/experiments/$1 p rel
+  [ -d "$src" ] || return 0
+  while read -r p; do rel=${p#"$src"/}
+    [ -d "$dst/$rel" ] || [ -f "$dst/${rel%.partial}/summary.json" ] || { mkdir -p "$dst/$rel"; cp -p "$p"/* "$dst/$rel/"; }
+  done < <(find "$src" -type d -name '*.partial')
+}
+
 run() {  # run EXPERIMENT SCALE ARGS...: one experiment at one scale, its journal under docs/data/
   local name=$1 scale=$2; shift 2
+  restore "$name-$scale"
+  trap "stash '$name-$scale'" EXIT  # also when the run is stopped (Ctrl-C, a failure)
   "$E" experiment run "$name" --scale "$scale" --storage "docs/data/$name-$scale/studies.log" \
       --out "runs/experiments/$name-$scale" "$@"
   collect "$name-$scale"
+  stash "$name-$scale"
+  trap - EXIT
 }
 
 step_cartpole() {  # H1: the paper-scale study (900 trials), selection, test 10 × 1M at 3 learning rates
@@ -77,7 +101,7 @@ step_probe() {  # H1, C4: velocity R² of each H1 study's Φ* (1 reservoir), aga
         --out "docs/data/$data/probe/$name.png"
   done
 }
-step_peer() {  # peer agreement: the CartPole Φ* trained 4 × 300k by SB3 + ReservoirPy and by ermrl, with either bias
+step_peer() {  # peer agreement: the CartPole Φ* trained 10 × 300k by SB3 + ReservoirPy and by ermrl, then paired
   local phi d=docs/data/partial-observability-paper/peer
   phi=$(.venv/bin/python - <<'PY'
 from ermrl import storage
@@ -111,6 +135,19 @@ PY
   # shellcheck disable=SC2086
   [ -f "$d/ermrl-none-host-fresh/summary.json" ] || "$E" train --env CartPoleNoVel-v1 $phi --seeds 10 \
       --first-seed 1000 --timesteps 300000 --bias none --backend host --no-save-agents --out "$d/ermrl-none-host-fresh"
+  # paired: SB3 on ermrl's reservoirs for 1000-1009, SB3 on ReservoirPy's for 10-19, ermrl's PPO on ReservoirPy's
+  # for 0-29 (and on its own draws), then the paired table (benchmarks/peer_summary.py)
+  # shellcheck disable=SC2086
+  [ -f "$d/reference-bernoulli-ermrl-weights-1000to1009.json" ] || "$REF" benchmarks/reference_pipeline.py \
+      --agents 10 --first-seed 1000 --timesteps 300000 --procs 2 $phi --bias bernoulli --weights ermrl \
+      --json "$d/reference-bernoulli-ermrl-weights-1000to1009.json"
+  # shellcheck disable=SC2086
+  [ -f "$d/reference-bernoulli-10to19.json" ] || "$REF" benchmarks/reference_pipeline.py --agents 10 \
+      --first-seed 10 --timesteps 300000 --procs 2 $phi --bias bernoulli --json "$d/reference-bernoulli-10to19.json"
+  # shellcheck disable=SC2086
+  [ -f "$d/ermrl-ppo-draws-0to29.json" ] || "$REF" benchmarks/peer_reservoir_draws.py --agents 30 \
+      --timesteps 300000 $phi --bias bernoulli --json "$d/ermrl-ppo-draws-0to29.json"
+  .venv/bin/python benchmarks/peer_summary.py "$d" | tee "$d/paired.md"
 }
 
 steps=("$@")

@@ -348,14 +348,16 @@ def read_agent(path: Path | str) -> tuple[dict, dict, dict, np.ndarray | None]:
 
 
 def find_agents(folder: Path | str) -> list[Path]:
-    """The saved agents under ``folder`` (a run folder, a test phase or a study folder, or an agents/ folder),
-    in a natural order: by folder, then by seed (seed2 before seed10)."""
+    """The saved agents under ``folder`` (a run folder, a test phase or a study folder, an agents/ folder, or one
+    model's folder in a test phase's agents/, e.g. ``test/agents/ppo``), in a natural order: by folder, then by
+    seed (seed2 before seed10)."""
     import re
 
     folder = Path(folder)
     natural = lambda part: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", part)]
+    inside = AGENTS_DIR in (folder.name, folder.parent.name)  # agents/ itself, or a test phase's model folder
     found = [p for p in folder.rglob("*.npz") if not p.name.startswith(".")
-             and (folder.name == AGENTS_DIR or AGENTS_DIR in p.relative_to(folder).parts[:-1])]
+             and (inside or AGENTS_DIR in p.relative_to(folder).parts[:-1])]
     return sorted(found, key=lambda p: [natural(part) for part in p.relative_to(folder).parts])
 
 

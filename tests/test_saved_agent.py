@@ -201,6 +201,8 @@ def test_the_test_phase_saves_every_model_agents(tmp_path):
     found = [p.relative_to(tmp_path).as_posix() for p in storage.find_agents(tmp_path)]
     assert found == ["agents/ermrl-lr-0.0001/seed1000.npz", "agents/ermrl-lr-0.0003/seed1000.npz",
                      "agents/ppo/seed1000.npz", "agents/ppo-full-observation/seed1000.npz"]
+    # one model's folder, as `ermrl analyze fft test/agents/ermrl test/agents/ppo` gives them
+    assert storage.find_agents(tmp_path / "agents" / "ppo") == [tmp_path / found[2]]
     slow = ermrl.load_agent(tmp_path / found[0])
     assert slow.learning_rate == pytest.approx(1e-4) and slow.phi.sr.tolist() == [pytest.approx(0.9)]
     full = ermrl.load_agent(tmp_path / found[3])
