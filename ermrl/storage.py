@@ -348,9 +348,8 @@ def read_agent(path: Path | str) -> tuple[dict, dict, dict, np.ndarray | None]:
 
 
 def find_agents(folder: Path | str) -> list[Path]:
-    """The saved agents under ``folder`` (a run folder, a test phase or a study folder, an agents/ folder, or one
-    model's folder in a test phase's agents/, e.g. ``test/agents/ppo``), in a natural order: by folder, then by
-    seed (seed2 before seed10)."""
+    """The saved agents under ``folder`` (a run, test phase or study folder, an agents/ folder or a model's folder
+    in it, e.g. ``test/agents/ppo``), in a natural order: by folder, then by seed (seed2 before seed10)."""
     import re
 
     folder = Path(folder)
