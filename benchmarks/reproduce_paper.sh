@@ -60,7 +60,9 @@ step_pendulum_medium() {  # H1: the same at the paper's per-trial budget (small'
   run partial-observability medium --only pendulum-1res
 }
 step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution, test 10 × 3M at lr 1e-4
-  run partial-observability small --only lunarlander-2res --test-seeds 10 --test-timesteps 3000000 --test-lrs 1e-4
+  # a model (10 agents × 3M host steps) takes longer than one sitting here: train and keep it 5 agents at a time
+  run partial-observability small --only lunarlander-2res --test-seeds 10 --test-timesteps 3000000 --test-lrs 1e-4 \
+      --test-agents-per-run 5
 }
 step_h2() {  # H2: Ant, HalfCheetah, Swimmer with 2 reservoirs, small evolution, test 10 × 1M against PPO
   run locomotion small --only ant-2res halfcheetah-2res swimmer-2res "${TEST10[@]}"

@@ -1,6 +1,7 @@
 """`ermrl experiment run`'s test budgets (--test-seeds, --test-timesteps, --test-lrs, also from --config) and a
 test phase that resumes model by model: one smoke study of CartPoleNoVel on the JAX backend, evolved once."""
 
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -161,12 +162,66 @@ def test_the_kept_model_reads_back_as_trained_and_is_refused_when_damaged_or_for
     assert checkpoints.load_job(tmp_path, "ermrl", identity) is None
 
 
+def test_a_model_trained_in_groups_of_agents_resumes_group_by_group(evolved, tmp_path):
+    """--test-agents-per-run 3: the 4-agent ER-MRL model (2 learning rates × 2 seeds) trains as agents 1–3, then
+    agent 4, each group kept when it finishes. Stopped in the second group, the rerun keeps the first and ends
+    with the scores and policies of the run that trained all 4 at once (to rounding: other batch sizes)."""
+    folder = tmp_path / "run"
+    shutil.copytree(evolved, folder)
+    shutil.rmtree(folder / STUDY / "test")
+    budget = dataclasses.replace(BUDGET, agents_per_run=3)
+    started = []
+
+    def stop_in_the_second_group(label):
+        started.append(label)
+        if label == "ER-MRL, agent 4 of 4":
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_in_process(folder, lambda s: None, stop_in_the_second_group, budget)
+    assert started[-2:] == ["ER-MRL, agents 1–3 of 4", "ER-MRL, agent 4 of 4"]
+    partial = folder / STUDY / "test.partial"
+    assert sorted(p.name for p in partial.iterdir()) == ["ermrl.agents-0-2.npz", "settings.json"]
+
+    logs, started = [], []
+    run_in_process(folder, logs.append, started.append, budget)
+    assert [line for line in logs if "from an earlier run" in line] == [
+        f"    test on CartPoleNoVel-v1: kept ER-MRL, agents 1–3 of 4 from an earlier run ({partial}/ermrl.agents-0-2.npz)"]
+    assert started[-3:] == ["ER-MRL, agent 4 of 4", "PPO (same observation)", "PPO (full observation)"]  # 2 agents: whole
+    assert not any(s.startswith("ER-MRL, agents 1") for s in started)
+    assert not partial.exists()
+    ours, theirs = folder / STUDY / "test", evolved / STUDY / "test"
+    rows, whole = (json.loads((f / "summary.json").read_text()) for f in (ours, theirs))
+    assert [r["model"] for r in rows] == [r["model"] for r in whole]
+    for r, w in zip(rows, whole):
+        np.testing.assert_allclose(r["per_seed"], w["per_seed"], rtol=1e-6)
+    agents = sorted(p.relative_to(theirs) for p in theirs.rglob("*.npz"))
+    assert sorted(p.relative_to(ours) for p in ours.rglob("*.npz")) == agents
+    for path in agents:
+        with np.load(ours / path) as a, np.load(theirs / path) as b:
+            for k in a.files:
+                if a[k].dtype.kind == "f":
+                    np.testing.assert_allclose(a[k], b[k], rtol=1e-3, atol=1e-5, err_msg=f"{path}: {k}")
+                else:
+                    assert np.array_equal(a[k], b[k]), f"{path}: {k}"
+
+
+def test_agents_per_run_below_one_is_a_one_line_error_for_ermrl_test(evolved, tmp_path, capsys):
+    out = tmp_path / "test-run"
+    args = ["test", "--study", f"{EXPERIMENT}-smoke-{STUDY}", "--storage", runner.default_storage(evolved),
+            "--out", str(out), "--seeds", "1", "--timesteps", "2048", "--agents-per-run", "0", "--quiet"]
+    assert main(args) == 2
+    assert capsys.readouterr().err == "ermrl test: error: --agents-per-run must be >= 1, got 0\n"
+    assert not (out / "test.partial").exists() and not (out / "test").exists()
+
+
 BAD = [
     (["--test-seeds", "0"], "--test-seeds must be >= 1, got 0"),
     (["--test-timesteps", "-5"], "--test-timesteps must be >= 1, got -5"),
     (["--test-lrs", "3e-4", "1.5"], "--test-lrs: learning rate 1.5 is outside (0, 1); the paper uses 3e-4 or 1e-4"),
     (["--test-lrs", "0"], "--test-lrs: learning rate 0 is outside (0, 1); the paper uses 3e-4 or 1e-4"),
     (["--test-lrs", "1e-4", "1e-4"], "--test-lrs gives 0.0001 twice; give each learning rate once"),
+    (["--test-agents-per-run", "0"], "--test-agents-per-run must be >= 1, got 0"),
     (["--test-seeds", "two"], "argument --test-seeds: invalid int value: 'two'; see `ermrl experiment run --help`"),
     (["--test-lrs"], "argument --test-lrs: expected at least one argument; see `ermrl experiment run --help`"),
 ]

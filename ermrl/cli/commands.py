@@ -356,6 +356,8 @@ def cmd_test(args) -> int:
     if args.tensorboard is not None:
         tensorboard.check_logdir(args.tensorboard)
     test = options.test_config(args)
+    if args.agents_per_run is not None and args.agents_per_run < 1:
+        raise ConfigError(f"--agents-per-run must be >= 1, got {args.agents_per_run}")
     if test.env_id is not None:
         from ermrl import envs
 
@@ -368,7 +370,8 @@ def cmd_test(args) -> int:
     models: list = []  # (label, Results) of every model, for TensorBoard
     try:
         rows = run_test_phase(study, out, test, timings, save_agents=args.save_agents, log=print,
-                              on_results=lambda label, results: models.append((label, results)))
+                              on_results=lambda label, results: models.append((label, results)),
+                              agents_per_run=args.agents_per_run)
     finally:
         close()
     if args.tensorboard is not None:

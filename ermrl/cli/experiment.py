@@ -33,7 +33,8 @@ def add_parser(sub, formatter) -> None:
     run.add_argument("--no-estimate", action="store_true", help="do not measure env step costs for the estimate")
     for flag, field, kwargs in (("--test-seeds", "seeds", {"type": int, "metavar": "N"}),
                                 ("--test-timesteps", "timesteps", {"type": int, "metavar": "N"}),
-                                ("--test-lrs", "ermrl_lrs", {"type": float, "nargs": "+", "metavar": "LR"})):
+                                ("--test-lrs", "ermrl_lrs", {"type": float, "nargs": "+", "metavar": "LR"}),
+                                ("--test-agents-per-run", "agents_per_run", {"type": int, "metavar": "N"})):
         options.Option(flag, TestBudget, field, kwargs=kwargs).add_to(run)
     options.add_options(run, "env", skip=("--timesteps",))
     options.add_config_option(run)
@@ -69,7 +70,7 @@ def _run(args) -> int:
 
     experiment, scale = registry.get(args.name), registry.get_scale(args.scale)
     budget = runner.TestBudget(args.test_seeds, args.test_timesteps,
-                               None if args.test_lrs is None else tuple(args.test_lrs))
+                               None if args.test_lrs is None else tuple(args.test_lrs), args.test_agents_per_run)
     names = {s.name for s in experiment.studies}
     unknown = [n for n in args.only if n not in names]
     if unknown:

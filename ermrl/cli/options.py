@@ -131,7 +131,12 @@ def _groups() -> dict[str, list[Option]]:
                  Option("--env", TestConfig, "env_id", kwargs={}),
                  Option("--trial", TestConfig, "trial", kwargs={"type": int}),
                  Option("--auc-steps", TestConfig, "auc_steps", kwargs={"type": int}),
-                 Option("--recurrent-baseline", TestConfig, "recurrent_baseline", kwargs={"action": "store_true"})],
+                 Option("--recurrent-baseline", TestConfig, "recurrent_baseline", kwargs={"action": "store_true"}),
+                 Option("--agents-per-run", help="train each model in groups of at most N agents (a seed at one "
+                        "learning rate), each kept in OUT.partial/ when it finishes, so that a stop loses one group "
+                        "at most: for models longer than one sitting (LunarLander at 3M steps). Results are the "
+                        "same up to rounding. Default: all agents of a model at once (the fastest).",
+                        kwargs={"type": int, "metavar": "N"})],
         "agents": [Option("--save-agents", help="save every agent's final policy in the run folder's agents/ "
                                                 "(one .npz each, about 100 kB at the default sizes; "
                                                 "ermrl.load_agent loads one).",

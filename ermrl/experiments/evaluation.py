@@ -119,7 +119,8 @@ def _phi_text(phi: Phi, k: int, trial: int) -> str:
 def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
                    progress: Callable[[str], Callable] | None = None, save_agents: bool = True,
                    log: Callable[[str], None] | None = None,
-                   on_results: Callable[[str, object], None] | None = None) -> list[dict]:
+                   on_results: Callable[[str, object], None] | None = None,
+                   agents_per_run: int | None = None) -> list[dict]:
     """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
     into ``out`` (checked before any training, written all at once at the end: :func:`ermrl.storage.staged_folder`),
     and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
@@ -130,6 +131,13 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     Each trained model is kept in ``out.partial/`` until ``out`` is written (:mod:`ermrl.experiments.checkpoints`):
     a rerun after a stop loads the models finished for the same settings and Φ* instead of training them again,
     telling ``log`` "kept MODEL from an earlier run"; the outputs are the same as those of an uninterrupted run.
+
+    ``agents_per_run`` trains each model in groups of at most that many agents (a seed at one learning rate is
+    one agent), one after another, each kept in ``out.partial/`` when it finishes: for a model longer than one
+    sitting (LunarLander at 3M steps), a stop then loses one group at most. Each agent trains as it would in the
+    whole population (its own seed, reservoirs, policy and envs); only floating-point rounding differs, since
+    XLA batches the arithmetic differently for other population sizes. None: every agent of a model at once,
+    the fastest.
 
     ``on_results(label, results)`` is called with each model's :class:`~ermrl.training.results.Results` (its
     ``test.seeds`` agents), e.g. to write TensorBoard logs of its learning curves and PPO diagnostics."""
@@ -164,21 +172,17 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
         jobs.append(("PPO-LSTM", lstm, Population.grid(no_phi, seeds, ppo_lr, 0), ["PPO-LSTM (same observation)"]))
         folders["PPO-LSTM (same observation)"] = "ppo-lstm"
 
+    if agents_per_run is not None and agents_per_run < 1:
+        raise ConfigError(f"--agents-per-run must be >= 1, got {agents_per_run}")
     partial, discarded = checkpoints.open_partial(out, {"test": storage.to_dict(test), "phi_trial": trial.number})
     if discarded and log:
         log(f"discarded the models of an unfinished test phase with other settings ({partial})")
     curves, seed_map, rows, agents = {}, {}, [], []
     for kind, train_config, population, model_labels in jobs:
         name = folders[model_labels[0]] if len(model_labels) == 1 else "ermrl"
-        identity = _job_identity(name, model_labels, train_config, population)
-        results = checkpoints.load_job(partial, name, identity)
-        if results is not None:
-            if log:
-                log(f"kept {', '.join(model_labels)} from an earlier run ({partial / name}.npz)")
-        else:
-            fn = progress(model_labels[0] if len(model_labels) == 1 else kind) if progress else None
-            results = Trainer(train_config).run(population, fn)
-            checkpoints.save_job(partial, name, identity, results)
+        shown = model_labels[0] if len(model_labels) == 1 else kind
+        results = _trained(partial, name, model_labels, train_config, population, agents_per_run, shown,
+                           progress, log)
         for m, label in enumerate(model_labels):
             part = results.select(np.arange(m * len(seeds), (m + 1) * len(seeds)))
             curves[label] = part.curves()
@@ -208,6 +212,38 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
         storage.write_test_summary(stage, rows)
     checkpoints.discard(out)
     return rows
+
+
+def _trained(partial: Path, name: str, labels: list[str], train_config, population: Population,
+             agents_per_run: int | None, shown: str, progress, log) -> Results:
+    """The results of one model (a job): kept from ``partial`` when an earlier run finished it, whole or in
+    groups of agents, else trained (in groups of ``agents_per_run``) and kept there group by group."""
+    whole = checkpoints.load_job(partial, name, _job_identity(name, labels, train_config, population))
+    if whole is not None:
+        if log:
+            log(f"kept {', '.join(labels)} from an earlier run ({partial / name}.npz)")
+        return whole
+    n = population.size
+    size = n if agents_per_run is None else min(agents_per_run, n)
+    trainer, parts = None, []
+    for lo in range(0, n, size):
+        hi = min(lo + size, n)
+        part = population if size == n else Population(population.seeds[lo:hi],
+                                                       Phi(*(f[lo:hi] for f in population.phi)),
+                                                       population.learning_rate[lo:hi])
+        part_name = name if size == n else f"{name}.agents-{lo}-{hi - 1}"
+        group = "" if size == n else f", agents {lo + 1}–{hi} of {n}" if hi - lo > 1 else f", agent {hi} of {n}"
+        identity = _job_identity(name, labels, train_config, part)
+        results = checkpoints.load_job(partial, part_name, identity)
+        if results is not None:
+            if log:
+                log(f"kept {shown}{group} from an earlier run ({partial / part_name}.npz)")
+        else:
+            trainer = trainer or Trainer(train_config)  # one compile serves every group of this size
+            results = trainer.run(part, progress(shown + group) if progress else None)
+            checkpoints.save_job(partial, part_name, identity, results)
+        parts.append(results)
+    return parts[0] if len(parts) == 1 else Results.concat(parts)
 
 
 def _job_identity(name: str, labels: list[str], train_config, population: Population) -> dict:

@@ -49,6 +49,10 @@ class TestBudget:
     """Env steps per agent in every test phase, the long ones (LunarLander) included; None: the scale's."""
     ermrl_lrs: tuple[float, ...] | None = None
     """ER-MRL's learning rates in every test phase, one model each; None: the study's (e.g. 3e-4 1e-4 5e-5)."""
+    agents_per_run: int | None = None
+    """Train each test model in groups of at most N agents (a seed at one learning rate), each kept when it
+    finishes, so that a stop loses one group at most: for models longer than one sitting (LunarLander at 3M).
+    Results are the same up to rounding; None: all agents of a model at once (the fastest)."""
 
     def __post_init__(self):
         if self.seeds is not None and self.seeds < 1:
@@ -57,6 +61,8 @@ class TestBudget:
             raise ConfigError(f"--test-timesteps must be >= 1, got {self.timesteps}")
         if self.ermrl_lrs is not None and not self.ermrl_lrs:
             raise ConfigError("--test-lrs needs at least one learning rate, e.g. --test-lrs 1e-4")
+        if self.agents_per_run is not None and self.agents_per_run < 1:
+            raise ConfigError(f"--test-agents-per-run must be >= 1, got {self.agents_per_run}")
         for i, lr in enumerate(self.ermrl_lrs or ()):
             if not 0 < lr < 1:
                 raise ConfigError(f"--test-lrs: learning rate {lr:g} is outside (0, 1); the paper uses 3e-4 or 1e-4")
@@ -193,7 +199,8 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
                 continue
             lrs = ", ".join(f"{lr:g}" for lr in t.ermrl_lrs)
             log(f"{where}: {t.seeds} seeds × {t.timesteps:,} steps, ER-MRL at lr {lrs}")
-            rows = run_test_phase(study, out, t, progress, log=lambda s, where=where: log(f"{where}: {s}"))
+            rows = run_test_phase(study, out, t, progress, log=lambda s, where=where: log(f"{where}: {s}"),
+                                  agents_per_run=budget.agents_per_run)
             for r in rows:
                 log(f"    test on {r['env_id']}: {r['model']}: final {r['final_mean']:.1f} ± {r['final_std']:.1f}"
                     if r["final_mean"] is not None else f"    test on {r['env_id']}: {r['model']}: all seeds diverged")

@@ -65,6 +65,12 @@ def _map(fn, tree):
     return {k: _map(fn, v) if isinstance(v, dict) else fn(v) for k, v in tree.items()}
 
 
+def _zip_map(fn, trees: list[dict]):
+    """``fn(*leaves)`` over the same leaf of every nested dict of ``trees`` (dicts of one structure)."""
+    return {k: _zip_map(fn, [t[k] for t in trees]) if isinstance(trees[0][k], dict) else fn(*(t[k] for t in trees))
+            for k in trees[0]}
+
+
 def fitness(episodes: Episodes, last: int = FITNESS_EPISODES) -> float:
     """Mean return of the last ``last`` completed episodes; NaN when none completed."""
     if len(episodes.ret) == 0:
@@ -153,6 +159,29 @@ class Results:
             learning_rate=self.learning_rate[idx], episodes=[self.episodes[i] for i in idx], finite=self.finite[idx],
             metrics={k: v[idx] for k, v in self.metrics.items()},
             policies=None if self.policies is None else self.policies.select(idx))
+
+    @staticmethod
+    def concat(parts: list["Results"]) -> "Results":
+        """The results of populations trained apart (same env, budget and settings) as one, agents in order:
+        the inverse of :meth:`select` over consecutive groups. Compile and training times add up."""
+        first = parts[0]
+        for p in parts[1:]:
+            if (p.env_id, p.total_timesteps, p.timesteps_per_iteration) != \
+                    (first.env_id, first.total_timesteps, first.timesteps_per_iteration):
+                raise ValueError("cannot join results of different envs or budgets")
+        cat = lambda *xs: np.concatenate(xs)
+        policies = None
+        if all(p.policies is not None for p in parts):
+            ps = [p.policies for p in parts]
+            policies = Policies(first.policies.env, _zip_map(cat, [q.actor for q in ps]),
+                                _zip_map(cat, [q.critic for q in ps]),
+                                None if ps[0].log_std is None else cat(*(q.log_std for q in ps)))
+        return dataclasses.replace(
+            first, seeds=cat(*(p.seeds for p in parts)), phi={k: cat(*(p.phi[k] for p in parts)) for k in first.phi},
+            learning_rate=cat(*(p.learning_rate for p in parts)), episodes=[e for p in parts for e in p.episodes],
+            finite=cat(*(p.finite for p in parts)),
+            metrics={k: cat(*(p.metrics[k] for p in parts)) for k in first.metrics},
+            compile_s=sum(p.compile_s for p in parts), train_s=sum(p.train_s for p in parts), policies=policies)
 
     def agent_steps_per_s(self) -> float:
         return self.size * self.total_timesteps / self.train_s if self.train_s > 0 else float("nan")
