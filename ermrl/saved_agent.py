@@ -1,7 +1,7 @@
 """A trained agent, loaded back from its file, acting in a plain Gymnasium loop: :func:`load_agent`.
 
 ``ermrl train`` and ``ermrl test`` save every agent's final policy (``RUN/agents/seedS.npz``, see
-:func:`ermrl.storage.write_agents`). The reservoirs are not in the file: they are regenerated from Φ and the seed
+:func:`ermrl.agent_files.write_agents`). The reservoirs are not in the file: they are regenerated from Φ and the seed
 (:meth:`ermrl.agent.Agent.unit_weights`), as :class:`ermrl.wrappers.ReservoirObservation` does. The agent here
 runs the trainer's perception and policy in NumPy (float32), so that one step costs microseconds, not a JAX call:
 
@@ -26,7 +26,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from ermrl import storage
+from ermrl import agent_files, storage
 from ermrl.agent import Agent, AgentConfig, Phi
 from ermrl.envs.spaces import EnvInfo
 from ermrl.errors import ConfigError
@@ -250,10 +250,10 @@ def load_agent(path: Path | str, sampling_seed: int = 0) -> SavedAgent:
     missing or damaged. ``sampling_seed`` seeds the Generator of stochastic actions."""
     path = Path(path)
     if path.is_dir():
-        found = storage.find_agents(path)
+        found = agent_files.find_agents(path)
         if not found:
             raise ConfigError(f"{path} has no saved agents (agents/*.npz); `ermrl train` and `ermrl test` save "
                               "them unless --no-save-agents")
         path = found[0]
-    meta, actor, critic, log_std = storage.read_agent(path)
+    meta, actor, critic, log_std = agent_files.read_agent(path)
     return SavedAgent(path, meta, actor, critic, log_std, sampling_seed)

@@ -10,9 +10,7 @@ trials' attributes and states going into the storage), found by watching the stu
 """
 
 import dataclasses
-import os
 import random
-import re
 import signal
 import sqlite3
 import subprocess
@@ -25,8 +23,7 @@ import optuna
 import pytest
 from optuna.trial import TrialState
 
-from ermrl import storage
-from ermrl.errors import ConfigError
+from ermrl import agent_files, storage
 
 POPSIZE = 4
 TINY = ["--seeds", "1", "--timesteps", "512", "--units", "10"]
@@ -228,75 +225,6 @@ def test_kill_9_at_ten_random_points_of_an_evolution_loses_only_the_trials_in_fl
     assert final.failed >= sum(s is not None and s.running > 0 for _, s in killed)  # each was failed, with a reason
 
 
-def test_a_staged_folder_appears_whole_or_not_at_all(tmp_path):
-    out = tmp_path / "run"
-    with pytest.raises(RuntimeError):
-        with storage.staged_folder(out) as stage:
-            storage.write_text(stage / "curves.csv", "model\n")
-            raise RuntimeError("crash while writing")
-    assert not out.exists() and list(tmp_path.iterdir()) == []
-    with storage.staged_folder(out) as stage:
-        storage.write_text(stage / "curves.csv", "new\n")
-        storage.write_text(stage / "agents" / "seed0.npz", "new")
-        storage.write_json(stage / "summary.json", {"n": 1})
-        assert not out.exists()
-    assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == ["agents", "agents/seed0.npz", "curves.csv",
-                                                                         "summary.json"]
-    assert list(tmp_path.iterdir()) == [out]
-
-
-def test_a_staged_folder_over_an_old_one_replaces_its_files_and_keeps_other_outputs(tmp_path):
-    out = tmp_path / "run"
-    for name, text in (("curves.csv", "old"), ("summary.json", "old"), ("agents/seed0.npz", "old"),
-                       ("agents/seed9.npz", "old"), ("context.png", "analysis")):
-        storage.write_text(out / name, text)
-    with pytest.raises(RuntimeError), storage.staged_folder(out) as stage:
-        storage.write_text(stage / "curves.csv", "new")
-        raise RuntimeError("crash while writing")
-    assert (out / "curves.csv").read_text() == "old" and (out / "summary.json").read_text() == "old"
-    with storage.staged_folder(out) as stage:
-        for name in ("curves.csv", "summary.json", "agents/seed0.npz"):
-            storage.write_text(stage / name, "new")
-    files = {str(p.relative_to(out)): p.read_text() for p in out.rglob("*") if p.is_file()}
-    assert files == {"curves.csv": "new", "summary.json": "new", "agents/seed0.npz": "new", "context.png": "analysis"}
-
-
-def test_a_killed_writers_staging_folder_is_removed_by_the_next_writer(tmp_path):
-    dead = subprocess.Popen([sys.executable, "-c", "pass"])
-    dead.wait()
-    host = __import__("socket").gethostname()
-    left = tmp_path / f".run.partial-{host}-{dead.pid}"
-    live = tmp_path / f".run.partial-{host}-{os.getppid()}"  # another writer, still running
-    for d in (left, live):
-        storage.write_text(d / "curves.csv", "half")
-    with storage.staged_folder(tmp_path / "run") as stage:
-        storage.write_text(stage / "summary.json", "{}")
-    assert not left.exists() and live.exists() and (tmp_path / "run" / "summary.json").exists()
-
-
-def test_a_torn_journal_tail_is_cut_so_that_the_next_append_keeps_the_journal_readable(tmp_path):
-    from optuna.storages import JournalStorage
-    from optuna.storages.journal import JournalFileBackend
-
-    path = tmp_path / "studies.log"
-
-    def study():
-        return optuna.create_study(study_name="k", storage=JournalStorage(JournalFileBackend(str(path))),
-                                   load_if_exists=True)
-
-    for v in range(3):
-        study().add_trial(optuna.trial.create_trial(value=float(v)))
-    path.write_bytes(path.read_bytes()[:-20])  # the last append cut short: trial 2 torn
-    assert storage.repair_journal(path) > 0 and path.read_bytes().endswith(b"\n")
-    assert storage.repair_journal(path) == 0  # sound now: left alone
-    study().add_trial(optuna.trial.create_trial(value=9.0))
-    assert [t.value for t in study().trials] == [0.0, 1.0, 9.0]
-    assert storage.repair_journal(tmp_path / "missing.log") == 0
-    for text in ("notes without a newline", "a line\nthen a torn one"):  # not journals: never cut
-        (tmp_path / "notes.log").write_text(text)
-        assert storage.repair_journal(tmp_path / "notes.log") == 0 and (tmp_path / "notes.log").read_text() == text
-
-
 def test_an_evolution_on_a_journal_with_a_torn_tail_resumes(tmp_path):
     """What a writer killed mid-append or a full disk leaves; the resume cuts it instead of gluing onto it."""
     cmd = cli(*EVOLVE, "--trials", "4", "--storage", "run/studies.log", "--out", "run", *WORKER)
@@ -309,56 +237,6 @@ def test_an_evolution_on_a_journal_with_a_torn_tail_resumes(tmp_path):
     trials = optuna.load_study(study_name="k", storage=optuna.storages.JournalStorage(
         optuna.storages.journal.JournalFileBackend(str(log)))).trials
     assert sum(t.state == TrialState.COMPLETE for t in trials) == 8
-
-
-def test_a_cut_or_empty_curves_file_is_refused(tmp_path):
-    """What a writer without the rename would leave after a crash: a file cut mid-line, or an empty one."""
-    path = tmp_path / "curves.csv"
-    storage.write_curves_csv(path, {"PPO": (np.array([2048, 4096]), np.array([[20.0, 30.0]]))}, {"PPO": np.array([0])})
-    whole = path.read_text()
-    assert storage.read_curves_csv(path)["PPO"][1].tolist() == [[20.0, 30.0]]
-    for text, why in ((whole[: whole.rindex(",")], "ValueError: line 3 has 3 fields, not 4"), ("", "ValueError: no rows")):
-        path.write_text(text)
-        with pytest.raises(ConfigError) as e:
-            storage.read_curves_csv(path)
-        assert str(e.value) == f"{path} is not a curves file written by ermrl ({why}); rerun the command that wrote it"
-
-
-HUGE = ["--timesteps", str(10**9)]
-"""A budget that would not end within the test's time limit: each error must come before any training."""
-
-
-@pytest.mark.skipif(not Path("/proc/self").exists(), reason="needs Linux's /proc")
-@pytest.mark.parametrize("argv, flag, path", [
-    (["train", "--env", "CartPole-v1", *HUGE, "--out", "/proc/ermrl/run"], "--out", "/proc/ermrl/run"),
-    (["test", "--study", "one", "--storage", "sqlite:///studies.db", *HUGE, "--out", "/proc/ermrl/run"], "--out",
-     "/proc/ermrl/run"),
-    (["test", "--study", "one", "--storage", "sqlite:///studies.db", *HUGE, "--tensorboard", "/proc/ermrl/tb"],
-     "--tensorboard", "/proc/ermrl/tb"),
-    (["plot", "run", "--out", "/proc/ermrl/fig.png"], "--out", "/proc/ermrl/fig.png"),
-    (["baselines", "--env", "CartPole-v1", *HUGE, "--recompute", "--table", "/proc/ermrl/t.json"], "baselines table",
-     "/proc/ermrl/t.json"),
-], ids=["train", "test", "test-tensorboard", "plot", "baselines"])  # the other commands' checks: test_bad_input.py
-def test_an_unwritable_output_is_refused_before_any_work(argv, flag, path, tmp_path):
-    """/proc/ermrl: no one can create anything there, root included (permission bits do not bind root)."""
-    from ermrl.evolution.config import EvolveConfig
-    from ermrl.evolution.search_space import SearchSpace
-    from ermrl.training import TrainConfig
-
-    space = SearchSpace(1, fixed_iss=1.0)
-    study = optuna.create_study(storage=f"sqlite:///{tmp_path / 'studies.db'}", study_name="one", direction="maximize")
-    study.set_user_attr("ermrl", storage.encode_study_record(EvolveConfig(
-        train=TrainConfig(env_id="CartPole-v1", total_timesteps=2048), space=space, trials=1, seeds=1)))
-    study.add_trial(optuna.trial.create_trial(params={"sr": 0.95, "lr": 0.5}, distributions=space.distributions(),
-                                              value=20.0))
-    storage.write_curves_csv(tmp_path / "run" / "curves.csv", {"PPO": (np.array([2048]), np.array([[20.0]]))},
-                             {"PPO": np.array([0])})
-    before = sorted(p.name for p in tmp_path.rglob("*"))
-    r = subprocess.run(cli(*argv), cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    message = (rf"ermrl {argv[0]}: error: {re.escape(flag)} {re.escape(path)}: cannot write in /proc "
-               r"\((no such file or directory|permission denied)\); give a folder you can write\n")  # mkdir's reason
-    assert r.returncode == 2 and re.fullmatch(message, r.stderr), r.stderr
-    assert sorted(p.name for p in tmp_path.rglob("*")) == before
 
 
 TEST = ["test", "--study", "k", "--out", "run", "--seeds", "2", "--timesteps", "512", "--quiet"]
@@ -376,8 +254,8 @@ def check_test_phase(folder: Path) -> bool:
     assert sorted(len(v) for _, v in curves.values()) == [2, 2]
     assert storage.read_json(folder / "test_config.json")["seeds"] == 2
     assert _whole_png(folder / "test_phase.png") and (folder / "test_phase.svg").read_text().rstrip().endswith("</svg>")
-    agents = storage.find_agents(folder)
-    assert len(agents) == 4 and all(storage.read_agent(a)[0]["seed"] in (1000, 1001) for a in agents)
+    agents = agent_files.find_agents(folder)
+    assert len(agents) == 4 and all(agent_files.read_agent(a)[0]["seed"] in (1000, 1001) for a in agents)
     return True
 
 
@@ -429,8 +307,8 @@ def check_train_run(folder: Path) -> bool:
     assert [len(v) for _, v in storage.read_curves_csv(folder / "curves.csv").values()] == [2]
     assert (folder / "episodes.csv").read_text().startswith("model,agent,seed,timestep,return,length\n")
     assert _whole_png(folder / "learning_curve.png")
-    agents = storage.find_agents(folder)
-    assert [storage.read_agent(a)[0]["seed"] for a in agents] == [0, 1]
+    agents = agent_files.find_agents(folder)
+    assert [agent_files.read_agent(a)[0]["seed"] for a in agents] == [0, 1]
     return True
 
 

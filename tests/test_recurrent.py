@@ -196,9 +196,9 @@ def test_pendulum_population_with_box_actions_saved_and_loaded(tmp_path):
     assert np.all(res.finite) and res.metrics["value_loss"].shape == (2, 1)
     assert res.policies.log_std.shape == (2, 1) and res.policies.actor["lstm"]["kernel_h"].shape == (2, 64, 256)
 
-    from ermrl import load_agent, storage
+    from ermrl import agent_files, load_agent
 
-    storage.write_agents(tmp_path, cfg, res, "PPO-LSTM")
+    agent_files.write_agents(tmp_path, cfg, res, "PPO-LSTM")
     agent = load_agent(tmp_path / "seed1.npz")
     net = RecurrentActorCritic(res.policies.env.action, (64, 64), 64)
     one = lambda tree: jax.tree.map(lambda x: jnp.asarray(x[1]), tree)

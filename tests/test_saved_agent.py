@@ -15,7 +15,7 @@ from optuna.distributions import FloatDistribution
 from optuna.trial import create_trial
 
 import ermrl
-from ermrl import envs, storage
+from ermrl import agent_files, envs, storage
 from ermrl.agent import Agent, AgentConfig, Phi
 from ermrl.errors import ConfigError
 from ermrl.evolution.config import EvolveConfig
@@ -45,7 +45,7 @@ def write_untrained_agent(folder, env_id, agent=AgentConfig(), seed=0, phi=Phi(0
     policies = Policies.from_params(info, jax.tree.map(lambda x: np.asarray(x)[None], params), 1)
     results = Results(env_id, 0, config.ppo.buffer_size, pop.seeds, phis, pop.learning_rate, [empty], np.ones(1, bool),
                       {}, 0.0, 0.0, policies)
-    return storage.write_agents(folder / "agents", config, results, "untrained")[0]
+    return agent_files.write_agents(folder / "agents", config, results, "untrained")[0]
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +61,7 @@ def trained(tmp_path_factory):
         for _ in range(trainer.n_iterations):
             state, _ = trainer.step(state)
         folder = tmp_path_factory.mktemp(env_id) / "agents"
-        out[env_id] = (config, results, storage.write_agents(folder, config, results, "ER-MRL"),
+        out[env_id] = (config, results, agent_files.write_agents(folder, config, results, "ER-MRL"),
                        jax.device_get(state.learner.params))
     return out
 
@@ -198,11 +198,11 @@ def test_the_test_phase_saves_every_model_agents(tmp_path):
     from ermrl.experiments.evaluation import TestConfig, run_test_phase
 
     run_test_phase(study, tmp_path, TestConfig(seeds=1, timesteps=2048, ermrl_lrs=(3e-4, 1e-4)))
-    found = [p.relative_to(tmp_path).as_posix() for p in storage.find_agents(tmp_path)]
+    found = [p.relative_to(tmp_path).as_posix() for p in agent_files.find_agents(tmp_path)]
     assert found == ["agents/ermrl-lr-0.0001/seed1000.npz", "agents/ermrl-lr-0.0003/seed1000.npz",
                      "agents/ppo/seed1000.npz", "agents/ppo-full-observation/seed1000.npz"]
     # one model's folder, as `ermrl analyze fft test/agents/ermrl test/agents/ppo` gives them
-    assert storage.find_agents(tmp_path / "agents" / "ppo") == [tmp_path / found[2]]
+    assert agent_files.find_agents(tmp_path / "agents" / "ppo") == [tmp_path / found[2]]
     slow = ermrl.load_agent(tmp_path / found[0])
     assert slow.learning_rate == pytest.approx(1e-4) and slow.phi.sr.tolist() == [pytest.approx(0.9)]
     full = ermrl.load_agent(tmp_path / found[3])

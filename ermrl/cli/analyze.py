@@ -104,10 +104,10 @@ def _check_numbers(args) -> None:
 
 def _load(name: str, storage: str | None):
     """Study ``name`` from ``storage`` (default: its sqlite in runs/NAME), without creating any file."""
-    from ermrl.cli.commands import _storage
+    from ermrl.cli.common import storage_url
     from ermrl.evolution.study import load_study, storage_file
 
-    url = _storage(argparse.Namespace(study=name, storage=storage, out=None))
+    url = storage_url(argparse.Namespace(study=name, storage=storage, out=None))
     file = storage_file(url)
     if file is not None and not file.exists():  # looking must not create a database
         raise ConfigError(f"no study {name!r}: {file} does not exist; run `ermrl evolve --study {name}` first "
@@ -182,13 +182,13 @@ def cmd_probe(args) -> int:
 
 
 def _agents(source: Path) -> list[Path]:
-    from ermrl import storage
+    from ermrl import agent_files
 
     if source.is_file():
         return [source]
     if not source.is_dir():
         raise ConfigError(f"{source} does not exist; give a run folder or a saved agent file (.npz)")
-    found = storage.find_agents(source)
+    found = agent_files.find_agents(source)
     if not found:
         raise ConfigError(f"{source} holds no saved agent; train with --save-agents (the default) first")
     return found

@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-from ermrl.cli import options
+from ermrl.cli import common, options
 from ermrl.errors import ConfigError
 
 # -- parsers ---------------------------------------------------------------------------------------------
@@ -28,7 +28,7 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--no-reservoir", action="store_true", help="plain PPO: the policy sees the observation")
     options.add_options(p, "env", "agent", "ppo", "model", "tensorboard", "agents")
     p.add_argument("--out", type=Path, default=None, help="run folder (default runs/train-ENV-TIME)")
-    _common(p)
+    common.config_and_quiet(p)
 
     p = sub.add_parser("evolve", help="evolve reservoir hyperparameters Φ with CMA-ES (the outer loop)",
                        description="Evolve Φ = (sr, lr, iss) with Optuna. Each generation (popsize trials × seeds) "
@@ -46,18 +46,18 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--allow-weak-baselines", action="store_true",
                    help="go on when vanilla PPO does not beat the random agent on an env at this budget (nScore is "
                         "then meaningless there); for wiring checks only")
-    _study_location(p, required=False)
+    common.study_location(p, required=False)
     p.add_argument("--no-estimate", action="store_true", help="skip the warm-up that estimates the total time")
-    _common(p)
+    common.config_and_quiet(p)
 
     p = sub.add_parser("select", help="re-evaluate the top trials on fresh seeds and pick a robust Φ*",
                        description="Re-evaluate the K best trials of a study on S new seeds (the evolution's envs, "
                                    "budget and fitness), record every re-evaluation and the winner in the study. "
                                    "`ermrl test` then uses the winner.", formatter_class=formatter)
-    _study_location(p)
+    common.study_location(p)
     p.add_argument("--top", type=int, default=5, help="how many of the best trials to re-evaluate")
     p.add_argument("--seeds", type=int, default=5, help="fresh seeds per trial (2000, 2001, ...)")
-    _common(p)
+    common.config_and_quiet(p)
 
     p = sub.add_parser("test", help="test phase: train Φ* on new seeds against PPO baselines",
                        description="Train Φ* (the selected trial, else the best) on new seeds, plus vanilla PPO on "
@@ -65,16 +65,16 @@ def add_parsers(sub, formatter) -> None:
                                    "--recurrent-baseline); write curves (CSV), a "
                                    "summary with IQM and bootstrap CIs, and the paper-style figure. --env tests on an "
                                    "env outside the evolution (generalization).", formatter_class=formatter)
-    _study_location(p)
+    common.study_location(p)
     options.add_options(p, "test", "tensorboard", "agents")
-    _common(p)
+    common.config_and_quiet(p)
 
     p = sub.add_parser("report", help="write a self-contained HTML report of a study",
                        description="Write report.html (images embedded): results first (best Φ, test phases with "
                                    "statistics), then fitness over trials, the HP map and the configuration.",
                        formatter_class=formatter)
-    _study_location(p)
-    _common(p, quiet=False)
+    common.study_location(p)
+    common.config_and_quiet(p, quiet=False)
 
     p = sub.add_parser("plot", help="plot several run folders' learning curves together",
                        description="Read the curves.csv of each run folder (from `ermrl train` or `ermrl test`) and "
@@ -82,7 +82,7 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("runs", type=Path, nargs="+", help="run folders holding curves.csv")
     p.add_argument("--out", type=Path, required=True, help="figure path (.png; .svg is written beside it too)")
     p.add_argument("--title", default="", help="figure title (default: the env id of the first run)")
-    _common(p, quiet=False)
+    common.config_and_quiet(p, quiet=False)
 
     p = sub.add_parser("baselines", help="compute the random and PPO scores that normalize several envs' fitness",
                        description="For each env: the random agent's mean episode return (uniform actions) and "
@@ -95,68 +95,7 @@ def add_parsers(sub, formatter) -> None:
     options.add_options(p, "env", "agent", "ppo", skip=())
     p.add_argument("--table", type=Path, default=None, help="table to update (default runs/baselines.json)")
     p.add_argument("--recompute", action="store_true", help="recompute entries that the table already has")
-    _common(p)
-
-
-def _common(p, quiet: bool = True) -> None:
-    options.add_config_option(p)
-    if quiet:
-        p.add_argument("--quiet", action="store_true", help="no progress display")
-
-
-def _study_location(p, required: bool = True) -> None:
-    p.add_argument("--study", required=required, default=None,
-                   help="study name, as given to or printed by `ermrl evolve`" + ("" if required else
-                                                                                   " (default ENV-Kres-STEPSk)"))
-    p.add_argument("--storage", default=None, help="Optuna storage URL or journal file (default sqlite in runs/STUDY)")
-    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/STUDY)")
-
-
-def _check_study_name(name: str | None) -> None:
-    if name is not None and not name.strip():
-        raise ConfigError("--study is empty; give the study's name (e.g. cartpole-1res), or leave --study out "
-                          "for `ermrl evolve` to name it")
-
-
-def _run_dir(args) -> Path:
-    """The study's folder (--out, else runs/STUDY), checked to be a folder that can be written."""
-    from ermrl import storage
-
-    _check_study_name(args.study)
-    return storage.check_folder(args.out or Path("runs") / args.study)
-
-
-def _storage(args) -> str:
-    from ermrl.evolution.study import default_storage
-
-    _check_study_name(args.study)
-    return args.storage or default_storage(_run_dir(args))
-
-
-def _storage_flag(args) -> str:
-    from ermrl.evolution.study import shown_url
-
-    out = f" --storage {shown_url(args.storage)}" if args.storage else ""
-    return out + (f" --out {args.out}" if args.out else "")
-
-
-def _bars(quiet: bool):
-    """(progress factory label -> progress_fn, closer) for commands that train several models in turn."""
-    from ermrl.cli.progress import TrainingBar
-
-    bars = []
-
-    def progress(label):
-        bar = TrainingBar(label, enabled=not quiet)
-        bar.__enter__()
-        bars.append(bar)
-        return bar.update
-
-    def close():
-        for bar in bars:
-            bar.__exit__(None, None, None)
-
-    return progress, close
+    common.config_and_quiet(p)
 
 
 # -- train and plot --------------------------------------------------------------------------------------
@@ -183,7 +122,7 @@ def _check_phi(phi) -> None:
 def cmd_train(args) -> int:
     import numpy as np
 
-    from ermrl import envs, storage
+    from ermrl import agent_files, envs, storage
     from ermrl.agent import Phi
     from ermrl.analysis import tensorboard
     from ermrl.analysis.plots import learning_curves
@@ -221,7 +160,7 @@ def cmd_train(args) -> int:
     with storage.staged_folder(out) as stage:  # all or nothing: summary.json, which marks it complete, last
         run = storage.write_train_run(stage, config, results, label, options.effective(args))
         if args.save_agents:
-            storage.write_agents(run.folder / storage.AGENTS_DIR, config, results, label)
+            agent_files.write_agents(run.folder / agent_files.AGENTS_DIR, config, results, label)
         learning_curves({label: results.curves()}, f"{results.env_id}: {label}", run.figure)
     if args.tensorboard is not None:
         tensorboard.write_results(args.tensorboard, results, label, timing.elapsed_s)
@@ -283,14 +222,14 @@ def cmd_evolve(args) -> int:
                           sampler_seed=args.sampler_seed, envs=env_ids if len(env_ids) > 1 else (),
                           normalization=args.normalization)
     worker = WorkerConfig(args.batch, args.worker_index, args.heartbeat_interval, args.grace_period)
-    _check_study_name(args.study)
+    common.check_study_name(args.study)
     name = args.study or "+".join(env_ids) + f"-{args.reservoirs}res-{args.timesteps // 1000}k"
     args.study = name
     if config.normalized:  # a damaged table or a folder given as one fails now, not after the baselines run
         from ermrl.experiments import baselines as bl
 
         bl.load_table(storage.check_file(args.baselines or bl.default_table(), "--baselines", "baselines.json"))
-    storage_url = _storage(args)
+    storage_url = common.storage_url(args)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     if config.normalized:
         config = baseline_runs.with_baselines(config, args.baselines, storage_url, name, print,
@@ -319,8 +258,8 @@ def cmd_evolve(args) -> int:
     if config.normalized:
         print("  per env: " + ", ".join(f"{e} {best.user_attrs['env_scores'][e]:.4g} (nScore "
                                          f"{best.user_attrs['env_nscores'][e]:.3g})" for e in env_ids))
-    print(f"next: ermrl select --study {name}{_storage_flag(args)} ; ermrl test --study {name}{_storage_flag(args)} ; "
-          f"ermrl report --study {name}{_storage_flag(args)}")
+    print(f"next: ermrl select --study {name}{common.storage_flag(args)} ; ermrl test --study {name}{common.storage_flag(args)} ; "
+          f"ermrl report --study {name}{common.storage_flag(args)}")
     return 0
 
 
@@ -331,9 +270,9 @@ def cmd_select(args) -> int:
 
     if args.top < 1 or args.seeds < 1:
         raise ConfigError(f"--top and --seeds must be >= 1, got {args.top} and {args.seeds}")
-    study = load_study(_storage(args), args.study)
+    study = load_study(common.storage_url(args), args.study)
     config = storage.decode_study_record(study.user_attrs[ATTR])
-    progress, close = _bars(args.quiet)
+    progress, close = common.bars(args.quiet)
     try:
         s = select(study, config, args.top, args.seeds, progress)
     finally:
@@ -342,7 +281,7 @@ def cmd_select(args) -> int:
     for number, before, after in zip(s.trials, s.evolution_values, s.values):
         mark = "  <- selected" if number == s.winner else ""
         print(f"  trial {number:>4}: evolution {before:9.4g}   fresh seeds {after if after is not None else float('nan'):9.4g}{mark}")
-    print(f"Φ* = trial {s.winner}; `ermrl test --study {args.study}{_storage_flag(args)}` now tests it")
+    print(f"Φ* = trial {s.winner}; `ermrl test --study {args.study}{common.storage_flag(args)}` now tests it")
     return 0
 
 
@@ -362,10 +301,10 @@ def cmd_test(args) -> int:
         from ermrl import envs
 
         envs.describe(test.env_id)  # an unknown id or a missing simulator, before opening the study
-    study = load_study(_storage(args), args.study)
+    study = load_study(common.storage_url(args), args.study)
     storage.decode_study_record(study.user_attrs[ATTR])
-    out = storage.check_folder(test_dir(_run_dir(args), study.user_attrs[ATTR], test.env_id))
-    progress, close = _bars(args.quiet)
+    out = storage.check_folder(test_dir(common.run_dir(args), study.user_attrs[ATTR], test.env_id))
+    progress, close = common.bars(args.quiet)
     timings = tensorboard.Timings(progress)  # the bars, and each population's update times for time/fps
     models: list = []  # (label, Results) of every model, for TensorBoard
     try:
@@ -399,8 +338,8 @@ def cmd_report(args) -> int:
     from ermrl.analysis.report import write_report
     from ermrl.evolution.study import load_study
 
-    study = load_study(_storage(args), args.study)
-    path = write_report(study, _run_dir(args))
+    study = load_study(common.storage_url(args), args.study)
+    path = write_report(study, common.run_dir(args))
     print(f"report: {path.resolve()}")
     return 0
 
@@ -414,7 +353,7 @@ def cmd_baselines(args) -> int:
     if args.seeds < 1 or args.random_episodes < 1:
         raise ConfigError(f"--seeds and --random-episodes must be >= 1, got {args.seeds} and {args.random_episodes}")
     lr = options.ppo_config(args).learning_rate
-    progress, close = _bars(args.quiet)
+    progress, close = common.bars(args.quiet)
     try:
         found = baseline_runs.ensure(args.env, args.timesteps, args.seeds, lr, args.table, print, progress,
                                      args.backend, args.env_workers, args.random_episodes, args.recompute)

@@ -15,7 +15,7 @@ from ermrl.errors import ConfigError
 
 def add_parser(sub, formatter) -> None:
     from ermrl.cli import options
-    from ermrl.cli.commands import _study_location
+    from ermrl.cli.common import study_location
 
     p = sub.add_parser("dashboard", help="serve optuna-dashboard: a live view of a study in the browser",
                        description="Serve optuna-dashboard for a study's storage on HOST:PORT and print the study "
@@ -23,7 +23,7 @@ def add_parser(sub, formatter) -> None:
                                    "generation, seed_fitness, failure, ...), the fitness over trials, parallel "
                                    "coordinates, slices, contours, ranks and Φ importances, and refreshes while a "
                                    "study runs. Ctrl-C stops it.", formatter_class=formatter)
-    _study_location(p)
+    study_location(p)
     p.add_argument("--host", default="127.0.0.1",
                    help="address to listen on (127.0.0.1: this machine only; the dashboard can edit the storage)")
     p.add_argument("--port", type=int, default=8080, help="port to listen on; 0 picks a free one")

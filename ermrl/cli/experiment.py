@@ -64,7 +64,7 @@ def _run(args) -> int:
     import optuna
 
     from ermrl import envs, storage
-    from ermrl.cli.commands import _bars
+    from ermrl.cli.common import bars
     from ermrl.evolution.study import make_storage, shown_url
     from ermrl.experiments import registry, runner
 
@@ -107,7 +107,7 @@ def _run(args) -> int:
         print(f"estimated time: {runner.estimate_seconds(plans, done, left) / 60:.0f} min (rough: nominal throughput, "
               f"{sum(done.values())} trials and {finished} test phases already done)")
 
-    progress, close = _bars(args.quiet)
+    progress, close = bars(args.quiet)
     try:
         report = runner.run_experiment(experiment, scale, folder, url, args.backend, args.env_workers, tuple(args.only),
                                        print, progress, args.baselines, budget)

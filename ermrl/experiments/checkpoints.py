@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ermrl import storage
+from ermrl import agent_files, storage
 from ermrl.envs.spaces import EnvInfo
 from ermrl.training.results import Episodes, Policies, Results
 
@@ -80,8 +80,8 @@ def save_job(folder: Path, name: str, identity: dict, results: Results) -> Path:
               **{f"phi/{k}": v for k, v in results.phi.items()},
               **{f"metrics/{k}": v for k, v in results.metrics.items()}}
     if results.policies is not None:
-        arrays.update(storage._flatten(results.policies.actor, "actor"))
-        arrays.update(storage._flatten(results.policies.critic, "critic"))
+        arrays.update(agent_files.flatten(results.policies.actor, "actor"))
+        arrays.update(agent_files.flatten(results.policies.critic, "critic"))
         if results.policies.log_std is not None:
             arrays["log_std"] = results.policies.log_std
     path = Path(folder) / f"{name}.npz"
@@ -119,7 +119,7 @@ def _results(meta: dict, flat: dict[str, np.ndarray]) -> Results:
     policies = None
     if meta["env"] is not None:
         env = storage.from_dict(EnvInfo, meta["env"], "env")
-        policies = Policies(env, storage._unflatten(flat, "actor"), storage._unflatten(flat, "critic"),
+        policies = Policies(env, agent_files.unflatten(flat, "actor"), agent_files.unflatten(flat, "critic"),
                             flat["log_std"] if meta["log_std"] else None)
     return Results(env_id=meta["env_id"], total_timesteps=meta["total_timesteps"],
                    timesteps_per_iteration=meta["timesteps_per_iteration"], seeds=flat["seeds"],

@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 import optuna
 
-from ermrl import envs, storage
+from ermrl import agent_files, envs, storage
 from ermrl.agent import Phi
 from ermrl.analysis import statistics
 from ermrl.envs import masking
@@ -204,7 +204,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
         title += f"\nΦ* evolved on {', '.join(evolved_on)}"
     with storage.staged_folder(out) as stage:  # all or nothing: summary.json, which marks it complete, last
         for folder, train_config, part, label in agents:
-            storage.write_agents(stage / storage.AGENTS_DIR / folder, train_config, part, label)
+            agent_files.write_agents(stage / agent_files.AGENTS_DIR / folder, train_config, part, label)
         storage.write_curves_csv(stage / "curves.csv", curves, seed_map)
         storage.write_json(stage / "test_config.json", {**dataclasses.asdict(test), "phi_trial": trial.number,
                                                         "phi_choice": how, "evolved_on": evolved_on})

@@ -1,0 +1,73 @@
+"""What the commands share: the study options (--study, --storage, --out), where a study's folder and storage
+are, and progress bars for commands that train several models in turn."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ermrl.cli import options
+from ermrl.errors import ConfigError
+
+
+def config_and_quiet(p, quiet: bool = True) -> None:
+    """Adds --config and, with ``quiet``, --quiet."""
+    options.add_config_option(p)
+    if quiet:
+        p.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def study_location(p, required: bool = True) -> None:
+    p.add_argument("--study", required=required, default=None,
+                   help="study name, as given to or printed by `ermrl evolve`" + ("" if required else
+                                                                                   " (default ENV-Kres-STEPSk)"))
+    p.add_argument("--storage", default=None, help="Optuna storage URL or journal file (default sqlite in runs/STUDY)")
+    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/STUDY)")
+
+
+def check_study_name(name: str | None) -> None:
+    if name is not None and not name.strip():
+        raise ConfigError("--study is empty; give the study's name (e.g. cartpole-1res), or leave --study out "
+                          "for `ermrl evolve` to name it")
+
+
+def run_dir(args) -> Path:
+    """The study's folder (--out, else runs/STUDY), checked to be a folder that can be written."""
+    from ermrl import storage
+
+    check_study_name(args.study)
+    return storage.check_folder(args.out or Path("runs") / args.study)
+
+
+def storage_url(args) -> str:
+    """The study's storage: --storage, else the SQLite file in its folder."""
+    from ermrl.evolution.study import default_storage
+
+    check_study_name(args.study)
+    return args.storage or default_storage(run_dir(args))
+
+
+def storage_flag(args) -> str:
+    """The --storage and --out flags to repeat in a suggested next command."""
+    from ermrl.evolution.study import shown_url
+
+    out = f" --storage {shown_url(args.storage)}" if args.storage else ""
+    return out + (f" --out {args.out}" if args.out else "")
+
+
+def bars(quiet: bool):
+    """(progress factory label -> progress_fn, closer) for commands that train several models in turn."""
+    from ermrl.cli.progress import TrainingBar
+
+    bars = []
+
+    def progress(label):
+        bar = TrainingBar(label, enabled=not quiet)
+        bar.__enter__()
+        bars.append(bar)
+        return bar.update
+
+    def close():
+        for bar in bars:
+            bar.__exit__(None, None, None)
+
+    return progress, close
