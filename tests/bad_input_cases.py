@@ -1,0 +1,250 @@
+"""The bad-input matrix of test_bad_input.py: (command line, the exact one line it must print on stderr), across
+every command. The command lines run in a copy of that file's working folder (a plain file, a folder, a malformed
+curves.csv, damaged config files, an npz that is no agent, and ``studies.db`` with the studies ``empty``,
+``one`` and ``plain``)."""
+
+SQLITE = "sqlite:///studies.db"
+
+CASES = [
+    # -- train: numbers, env ids, flags, paths --------------------------------------------------------------
+    ("train --units 0", "ermrl train: error: units must be >= 1, got 0; a reservoir needs at least one neuron"),
+    ("train --units -5", "ermrl train: error: units must be >= 1, got -5; a reservoir needs at least one neuron"),
+    ("train --units abc", "ermrl train: error: argument --units: invalid int value: 'abc'; see `ermrl train --help`"),
+    ("train --timesteps 0", "ermrl train: error: total timesteps must be >= 1, got 0"),
+    ("train --timesteps 1e5",
+     "ermrl train: error: argument --timesteps: invalid int value: '1e5'; see `ermrl train --help`"),
+    ("train --seeds 0", "ermrl train: error: --seeds must be >= 1, got 0"),
+    ("train --sr nan", "ermrl train: error: --sr must be positive and finite, got [nan]"),
+    ("train --sr inf", "ermrl train: error: --sr must be positive and finite, got [inf]"),
+    ("train --iss -1", "ermrl train: error: --iss must be positive and finite, got [-1.0]"),
+    ("train --lr 0", "ermrl train: error: --lr must be positive and finite, got [0.0]"),
+    ("train --env CartPolee-v1", "ermrl train: error: unknown env id 'CartPolee-v1': Gymnasium has no "
+                                 "'CartPolee-v1'; did you mean CartPole-v1, CartPole-v0, CartPoleNoVel-v1?"),
+    ("train --env Blackjack-v1", "ermrl train: error: env 'Blackjack-v1' has observation space Tuple(Discrete(32), "
+                                 "Discrete(11), Discrete(2)); only 1-D Box observations are supported"),
+    ("train --env LunarLander-v3 --backend jax", "ermrl train: error: env 'LunarLander-v3' has no JAX version; use "
+                                                 "--backend host or auto (the JAX backend runs: Acrobot-v1, CartPole-v1, "
+                                                 "CartPoleNoVel-v1, MountainCar-v0, MountainCarContinuous-v0, "
+                                                 "MountainCarContinuousNoVel-v0, MountainCarNoVel-v0, Pendulum-v1, "
+                                                 "PendulumNoVel-v1)"),
+    ("train --backend gpu", "ermrl train: error: argument --backend: invalid choice: 'gpu' (choose from 'auto', "
+                            "'jax', 'host'); see `ermrl train --help`"),
+    ("train --reservoirs -1", "ermrl train: error: reservoirs must be >= 0, got -1"),
+    ("train --observed-units 1000", "ermrl train: error: observed_units must be in [1, 100], got 1000"),
+    ("train --env-workers -1", "ermrl train: error: argument --env-workers: must be 'auto' or an integer >= 0, got "
+                               "'-1'; see `ermrl train --help`"),
+    ("train --ppo-lr nan", "ermrl train: error: learning rate nan is outside (0, 1); the paper uses 3e-4 or 1e-4"),
+    ("train --reservoirs 2 --sr 1 2 3", "ermrl train: error: --sr got 3 values for 2 reservoirs; give one value or 2"),
+    ("train --model lstm --skip-connection",
+     "ermrl train: error: --skip-connection feeds the observation beside a reservoir's context, but --model lstm has "
+     "no reservoir and already sees the observation; drop --skip-connection"),
+    ("train --model lstm --env LunarLander-v3",
+     "ermrl train: error: the LSTM baseline (--model lstm) runs on the JAX backend only, and LunarLander-v3 would "
+     "run on the host (backend 'auto'); JAX envs: Acrobot-v1, CartPole-v1, CartPoleNoVel-v1, MountainCar-v0, "
+     "MountainCarContinuous-v0, MountainCarContinuousNoVel-v0, MountainCarNoVel-v0, Pendulum-v1, PendulumNoVel-v1"),
+    ("train --out afile", "ermrl train: error: --out afile is a file, not a folder; give a folder path (it is created "
+                          "if missing)"),
+    ("train --out afile/run", "ermrl train: error: --out afile/run: its parent afile is a file, not a folder; give a "
+                              "folder path (it is created if missing)"),
+    ("train --tensorboard afile", "ermrl train: error: --tensorboard afile is a file, not a folder; give a folder "
+                                  "path (it is created if missing)"),
+    ("train --colour red", "ermrl train: error: unrecognized arguments: --colour red; see `ermrl train --help`"),
+    ("evolve --popsise 5", "ermrl evolve: error: unrecognized arguments: --popsise 5 (did you mean --popsize?); see "
+                           "`ermrl evolve --help`"),
+    # -- config files -------------------------------------------------------------------------------------
+    ("train --config missing.toml", "ermrl train: error: config file missing.toml does not exist; give the path of "
+                                    "a .toml or .yaml file"),
+    ("train --config adir.toml", "ermrl train: error: config file adir.toml is a folder; give the path of a .toml "
+                                 "or .yaml file"),
+    ("train --config x.json", "ermrl train: error: config file x.json must end in .toml, .yaml or .yml"),
+    ("train --config list.yaml", "ermrl train: error: config file list.yaml must hold a table of option = value "
+                                 "pairs"),
+    ("train --config scalar.yaml", "ermrl train: error: config file scalar.yaml must hold a table of option = value "
+                                   "pairs"),
+    ("train --config bad.toml", "ermrl train: error: config file bad.toml is not valid TOML (Invalid value (at line "
+                                "1, column 9))"),
+    ("train --config latin1.toml", "ermrl train: error: config file latin1.toml is not UTF-8 text (byte 9); save it "
+                                   "as UTF-8"),
+    ("train --config unk.toml", "ermrl train: error: config file unk.toml: unknown option 'unitz' for `ermrl train`; "
+                                "did you mean 'units'?"),
+    ("train --config evolvekey.toml",
+     "ermrl train: error: config file evolvekey.toml: unknown option 'trials' for `ermrl train`; options here: "
+     "backend, bias, env, env-workers, feed-action, first-seed, iss, lr, lstm-hidden, lstm-seq-len, model, no-reservoir, "
+     "observed-units, out, ppo-lr, preset, quiet, reservoirs, save-agents, seeds, skip-connection, sr, tensorboard, "
+     "timesteps, units"),
+    ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "
+                                "integer"),
+    ("train --config float.toml", "ermrl train: error: config file float.toml: units must be an integer, got 2.5"),
+    ("train --config timesteps.yaml", "ermrl train: error: config file timesteps.yaml: timesteps has the wrong type: "
+                                      "'1e5'; give an integer"),
+    ("train --config many.toml", "ermrl train: error: config file many.toml: units takes one value, got a list "
+                                 "[10, 20]"),
+    ("train --config nested.toml", "ermrl train: error: config file nested.toml: units has the wrong type: "
+                                   "{'n': 1}; give an integer"),
+    ("train --config choice.toml", "ermrl train: error: config file choice.toml: bias must be one of bernoulli, "
+                                   "none, got 'gaussian'"),
+    ("train --config bool.toml", "ermrl train: error: config file bool.toml: skip-connection must be true or false, "
+                                 "got 1"),
+    # -- evolve: the search, the study, the storage ---------------------------------------------------------
+    ("evolve --popsize 1", "ermrl evolve: error: --popsize must be >= 2 (CMA-ES needs at least 2 candidates a "
+                           "generation), got 1"),
+    ("evolve --popsize -3", "ermrl evolve: error: --popsize must be >= 2 (CMA-ES needs at least 2 candidates a "
+                            "generation), got -3"),
+    ("evolve --sampler-seed -1", "ermrl evolve: error: --sampler-seed must be >= 0, got -1"),
+    ("evolve --trials 0", "ermrl evolve: error: --trials must be >= 1, got 0"),
+    ("evolve --seeds 0", "ermrl evolve: error: --seeds must be >= 1, got 0"),
+    ("evolve --sampler grid", "ermrl evolve: error: unknown sampler 'grid'; choose one of cmaes, random, tpe"),
+    ("evolve --min-sr 0", "ermrl evolve: error: bad sr bounds [0.0, 100.0]: need 0 < --min-sr < --max-sr "
+                          "(log-uniform)"),
+    ("evolve --max-sr inf", "ermrl evolve: error: bad sr bounds [0.0001, inf]: need 0 < --min-sr < --max-sr "
+                            "(log-uniform)"),
+    ("evolve --min-sr 10 --max-sr 1", "ermrl evolve: error: bad sr bounds [10.0, 1.0]: need 0 < --min-sr < --max-sr "
+                                      "(log-uniform)"),
+    ("evolve --max-lr 2", "ermrl evolve: error: bad lr bounds [0.01, 2.0]: a leak rate is at most 1; use --max-lr 1"),
+    ("evolve --fixed-iss nan", "ermrl evolve: error: --fixed-iss must be positive, got nan"),
+    ("evolve --reservoirs 0", "ermrl evolve: error: evolution needs at least 1 reservoir, got 0"),
+    ("evolve --normalization minmax", "ermrl evolve: error: argument --normalization: invalid choice: 'minmax' "
+                                      "(choose from 'episodic', 'reference'); see `ermrl evolve --help`"),
+    ("evolve --env CartPole-v1 --env CartPole-v1", "ermrl evolve: error: --env lists an env twice: CartPole-v1, "
+                                                   "CartPole-v1; give each env once"),
+    ("evolve --env CartPole-v1 --env Pendulum-v1 --baselines afile",
+     "ermrl evolve: error: baselines table afile is damaged (Expecting value: line 1 column 1 (char 0)); fix it or "
+     "delete it and rerun `ermrl baselines`"),
+    ("evolve --env CartPole-v1 --env Pendulum-v1 --baselines adir",
+     "ermrl evolve: error: --baselines adir is a folder; give a file path such as adir/baselines.json"),
+    ("evolve --batch 0", "ermrl evolve: error: --batch must be >= 1, got 0"),
+    ("evolve --heartbeat-interval 0", "ermrl evolve: error: --heartbeat-interval must be >= 1 (seconds), got 0"),
+    ("evolve --heartbeat-interval 30 --grace-period 30",
+     "ermrl evolve: error: --grace-period (30 s) must be longer than --heartbeat-interval (30 s), or live trials "
+     "would be failed as lost"),
+    ("evolve --worker-index -1", "ermrl evolve: error: --worker-index must be >= 0, got -1"),
+    ("evolve --study ''", "ermrl evolve: error: --study is empty; give the study's name (e.g. cartpole-1res), or "
+                          "leave --study out for `ermrl evolve` to name it"),
+    ("evolve --out afile", "ermrl evolve: error: --out afile is a file, not a folder; give a folder path (it is "
+                           "created if missing)"),
+    ("evolve --storage foo://db", "ermrl evolve: error: cannot open storage 'foo://db' (Can't load plugin: "
+                                  "sqlalchemy.dialects:foo); use sqlite:///PATH.db, a journal file PATH.log, or a "
+                                  "reachable database URL"),
+    ("evolve --storage afile", "ermrl evolve: error: cannot open storage 'afile' (Could not parse SQLAlchemy URL from "
+                               "given URL string); use sqlite:///PATH.db, a journal file PATH.log, or a reachable "
+                               "database URL"),
+    ("evolve --storage junk.log", "ermrl evolve: error: cannot open storage 'junk.log' (Expecting value: line 1 "
+                                  "column 1 (char 0)); use sqlite:///PATH.db, a journal file PATH.log, or a "
+                                  "reachable database URL"),
+    ("select --study s --storage junk.log", "ermrl select: error: cannot open storage 'junk.log' (Expecting value: "
+                                            "line 1 column 1 (char 0)); use sqlite:///PATH.db, a journal file "
+                                            "PATH.log, or a reachable database URL"),
+    (f"evolve --study one --storage {SQLITE} --units 50",
+     "ermrl evolve: error: study 'one' already exists with another config; rerun with the same flags to resume it, "
+     "or pick a new --study name"),
+    # -- select, test, report: missing studies and their numbers -------------------------------------------
+    ("select", "ermrl select: error: the following arguments are required: --study; see `ermrl select --help`"),
+    ("select --study nope", "ermrl select: error: no study 'nope': runs/nope/study.db does not exist; run `ermrl "
+                            "evolve` first or pass --storage/--out"),
+    (f"select --study nope --storage {SQLITE}", "ermrl select: error: no study 'nope' in 'sqlite:///studies.db'; "
+                                                "studies there: empty, one, plain"),
+    (f"select --study empty --storage {SQLITE}", "ermrl select: error: study 'empty' has no completed trial yet; run "
+                                                 "`ermrl evolve` first"),
+    (f"select --study plain --storage {SQLITE}", "ermrl select: error: study 'plain' was not made by `ermrl evolve` "
+                                                 "(no 'ermrl' attribute)"),
+    (f"select --study one --storage {SQLITE} --top 0", "ermrl select: error: --top and --seeds must be >= 1, got 0 "
+                                                       "and 5"),
+    ("select --study s --storage missing.log", "ermrl select: error: no study 's': missing.log does not exist; run "
+                                               "`ermrl evolve` first or pass --storage/--out"),
+    ("test --study s --seeds 0", "ermrl test: error: --seeds must be >= 1, got 0"),
+    ("test --study s --ermrl-lr 2", "ermrl test: error: learning rate 2.0 is outside (0, 1); the paper uses 3e-4 or "
+                                    "1e-4"),
+    ("test --study s --trial -1", "ermrl test: error: --trial must be a trial number >= 0, got -1"),
+    ("test --study s --auc-steps 0", "ermrl test: error: --auc-steps must be >= 1, got 0"),
+    ("test --study s --agents-per-run 0", "ermrl test: error: --agents-per-run must be >= 1, got 0"),
+    ("test --study s --env Nope-v1", "ermrl test: error: unknown env id 'Nope-v1': Gymnasium has no 'Nope-v1'; did "
+                                     "you mean Hopper-v5, Hopper-v4, Hopper-v3?"),
+    (f"test --study one --storage {SQLITE} --trial 7", "ermrl test: error: trial 7 of study 'one' is not a completed "
+                                                       "trial; completed trials include 0"),
+    (f"test --study empty --storage {SQLITE}", "ermrl test: error: study 'empty' has no completed trial yet; run "
+                                               "`ermrl evolve` first"),
+    ("report --study nope", "ermrl report: error: no study 'nope': runs/nope/study.db does not exist; run `ermrl "
+                            "evolve` first or pass --storage/--out"),
+    ("report --study nope --out afile", "ermrl report: error: --out afile is a file, not a folder; give a folder "
+                                        "path (it is created if missing)"),
+    # -- plot, baselines ------------------------------------------------------------------------------------
+    ("plot curves_bad --out fig.png", "ermrl plot: error: curves_bad/curves.csv is not a curves file written by ermrl "
+                                      "(KeyError: 'mean_return_100'); rerun the command that wrote it"),
+    ("plot nothere --out fig.png", "ermrl plot: error: nothere has no curves.csv; give folders written by `ermrl "
+                                   "train` or `ermrl test`"),
+    ("plot curves_bad", "ermrl plot: error: the following arguments are required: --out; see `ermrl plot --help`"),
+    ("baselines --env Nope-v0", "ermrl baselines: error: unknown env id 'Nope-v0': Gymnasium has no 'Nope-v0'; did "
+                                "you mean Hopper-v5, Hopper-v4, Hopper-v3?"),
+    ("baselines --env CartPole-v1 --random-episodes 0", "ermrl baselines: error: --seeds and --random-episodes must "
+                                                        "be >= 1, got 3 and 0"),
+    ("baselines --env CartPole-v1 --table adir", "ermrl baselines: error: baselines table adir is a folder; give a "
+                                                 "file path such as adir/baselines.json"),
+    ("baselines --env CartPole-v1 --table afile", "ermrl baselines: error: baselines table afile is damaged "
+                                                  "(Expecting value: line 1 column 1 (char 0)); fix it or delete it "
+                                                  "and rerun `ermrl baselines`"),
+    # -- experiment -----------------------------------------------------------------------------------------
+    ("experiment run partial-observabilty", "ermrl experiment: error: unknown experiment 'partial-observabilty'; did "
+                                            "you mean partial-observability? (`ermrl experiment list` names them all)"),
+    ("experiment run partial-observability --test-agents-per-run 0",
+     "ermrl experiment: error: --test-agents-per-run must be >= 1, got 0"),
+    ("experiment run partial-observability --scale huge",
+     "ermrl experiment: error: argument --scale: invalid choice: 'huge' (choose from 'smoke', 'small', 'medium', "
+     "'paper'); see "
+     "`ermrl experiment run --help`"),
+    ("experiment run partial-observability --only cartpole1res",
+     "ermrl experiment: error: experiment partial-observability has no study 'cartpole1res'; its studies: "
+     "cartpole-1res, cartpole-2res, lunarlander-1res, lunarlander-2res, pendulum-1res, pendulum-2res; did you mean "
+     "cartpole-1res?"),
+    ("experiment run generalization-morphology --scale smoke --baselines afile",
+     "ermrl experiment: error: baselines table afile is damaged (Expecting value: line 1 column 1 (char 0)); fix it "
+     "or delete it and rerun `ermrl baselines`"),
+    ("experiment run partial-observability --out afile", "ermrl experiment: error: --out afile is a file, not a "
+                                                         "folder; give a folder path (it is created if missing)"),
+    # -- analyze --------------------------------------------------------------------------------------------
+    ("analyze hp-map nope --out fig.png", "ermrl analyze: error: no study 'nope': runs/nope/study.db does not exist; "
+                                          "run `ermrl evolve --study nope` first or pass --storage"),
+    (f"analyze hp-map empty --storage {SQLITE} --out fig.png",
+     "ermrl analyze: error: study 'empty' has no completed trial; run `ermrl evolve --study empty` until one "
+     "completes"),
+    ("analyze probe --env CartPole-v1 --out fig.png", "ermrl analyze: error: probe needs a NoVel env id whose "
+                                                      "velocities are deleted, got 'CartPole-v1'; use "
+                                                      "'CartPoleNoVel-v1'"),
+    ("analyze probe --env Nope-v1 --out fig.png", "ermrl analyze: error: unknown env id 'Nope-v1': Gymnasium has no "
+                                                  "'Nope-v1'; did you mean Hopper-v5, Hopper-v4, Hopper-v3?"),
+    ("analyze probe --env CartPoleNoVel-v1 --phi nan 0.5 1 --out fig.png",
+     "ermrl analyze: error: --phi nan 0.5 1: SR and ISS must be positive and finite and LR (the leak rate) in (0, 1]"),
+    ("analyze probe --env CartPoleNoVel-v1 --phi 1 0.5 --out fig.png",
+     "ermrl analyze: error: argument --phi: expected 3 arguments; see `ermrl analyze probe --help`"),
+    (f"analyze probe --env CartPoleNoVel-v1 --study one --storage {SQLITE} --units 50 --out fig.png",
+     "ermrl analyze: error: study 'one' evolved 100-unit reservoirs; pass --units 100"),
+    ("analyze probe --env CartPoleNoVel-v1 --out afile/fig.png", "ermrl analyze: error: --out afile/fig.png: its "
+                                                                 "parent afile is a file, not a folder; give a path "
+                                                                 "in a folder"),
+    ("analyze context nothere", "ermrl analyze: error: nothere does not exist; give a run folder or a saved agent "
+                                "file (.npz)"),
+    ("analyze context adir", "ermrl analyze: error: adir holds no saved agent; train with --save-agents (the "
+                             "default) first"),
+    ("analyze context badagent.npz --units 0", "ermrl analyze: error: --units must be >= 1, got 0"),
+    ("analyze fft badagent.npz --out fig.png --seed -1", "ermrl analyze: error: --seed must be >= 0, got -1"),
+    ("analyze fft badagent.npz --out fig.png",
+     "ermrl analyze: error: badagent.npz is not a readable ermrl agent file (KeyError: 'meta'); it "
+     "is damaged or was not written by ermrl: retrain, or load another agent"),
+    # -- video, dashboard, the command itself ----------------------------------------------------------------
+    ("video", "ermrl video: error: give a run folder (ermrl video RUN) or an agent file (--agent FILE)"),
+    ("video nothere", "ermrl video: error: run folder nothere does not exist; give a folder written by `ermrl train` "
+                      "or `ermrl test`"),
+    ("video afile", "ermrl video: error: afile is a file, not a run folder; give the folder, or the agent file as "
+                    "--agent afile"),
+    ("video --agent badagent.npz --episodes 0", "ermrl video: error: --episodes must be >= 1, got 0"),
+    ("video --agent badagent.npz --fps 0", "ermrl video: error: --fps must be a positive number, got 0.0; or leave "
+                                           "it out for the env's rate"),
+    ("video --agent badagent.npz --out clip.avi", "ermrl video: error: video file clip.avi must end in .mp4 or .gif"),
+    ("dashboard --study nope", "ermrl dashboard: error: no study 'nope': runs/nope/study.db does not exist; run "
+                               "`ermrl evolve` first or pass --storage/--out"),
+    ("dashboard --study one --port 70000", "ermrl dashboard: error: --port 70000 is not a port; give 1..65535, or 0 "
+                                           "for any free port"),
+    ("", "ermrl: error: the following arguments are required: COMMAND; see `ermrl --help`"),
+    ("trian --units 5", "ermrl: error: argument COMMAND: invalid choice: 'trian' (choose from 'train', 'evolve', "
+                        "'select', 'test', 'report', 'plot', 'baselines', 'experiment', 'analyze', 'video', "
+                        "'dashboard'); see `ermrl --help`"),
+]
