@@ -299,6 +299,7 @@ def encode_study_record(config) -> dict:
         "version": STUDY_RECORD_VERSION, "env_id": config.env_ids[0], "envs": list(config.env_ids),
         "reservoirs": config.space.reservoirs, "seeds": config.seeds, "timesteps": config.train.total_timesteps,
         "sampler": config.sampler, "popsize": config.generation_size, "sampler_seed": config.sampler_seed,
+        "seed_schedule": config.seed_schedule,
         "learning_rate": config.train.ppo.learning_rate, "search_space": config.space.to_dict(),
         "train": to_dict(config.train), "trials": config.trials, "normalization": config.normalization,
         "baselines": [to_dict(b) for b in config.baselines],
@@ -317,7 +318,8 @@ def decode_study_record(record: dict):
         return EvolveConfig(
             train=train, space=SearchSpace.from_dict(record["reservoirs"], record["search_space"]),
             trials=record["trials"], seeds=record["seeds"], sampler=record["sampler"], popsize=record["popsize"],
-            sampler_seed=record.get("sampler_seed", 0), envs=tuple(record.get("envs", ())),
+            sampler_seed=record.get("sampler_seed", 0), seed_schedule=record.get("seed_schedule", "fixed"),
+            envs=tuple(record.get("envs", ())),
             normalization=record.get("normalization", "episodic"),
             baselines=tuple(from_dict(Baseline, b, "baselines") for b in record.get("baselines", ())))
     except (KeyError, TypeError) as e:

@@ -91,6 +91,8 @@ CASES = [
     ("evolve --popsize -3", "ermrl evolve: error: --popsize must be >= 2 (CMA-ES needs at least 2 candidates a "
                             "generation), got -3"),
     ("evolve --sampler-seed -1", "ermrl evolve: error: --sampler-seed must be >= 0, got -1"),
+    ("evolve --seed-schedule weekly", "ermrl evolve: error: argument --seed-schedule: invalid choice: 'weekly' "
+                                      "(choose from 'fixed', 'generation'); see `ermrl evolve --help`"),
     ("evolve --trials 0", "ermrl evolve: error: --trials must be >= 1, got 0"),
     ("evolve --seeds 0", "ermrl evolve: error: --seeds must be >= 1, got 0"),
     ("evolve --sampler grid", "ermrl evolve: error: unknown sampler 'grid'; choose one of cmaes, random, tpe"),

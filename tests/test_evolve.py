@@ -1,5 +1,6 @@
 """Evolution, resumption, divergence, the test phase and the report, at tiny budgets."""
 
+import dataclasses
 import json
 import shutil
 import signal
@@ -52,6 +53,25 @@ def test_two_cmaes_generations_store_every_trial(tmp_path):
         assert len(t.user_attrs["seed_fitness"]) == 2 and len(t.user_attrs["curve_final"]) == 2
         assert t.value == pytest.approx(np.mean(t.user_attrs["seed_fitness"]))
     assert study.user_attrs["ermrl"]["popsize"] == 6 and study.user_attrs["ermrl"]["search_space"]["iss"] == {"fixed": 1.0}
+
+
+@pytest.mark.parametrize("schedule", ["fixed", "generation"])
+def test_the_seed_schedule_sets_each_trials_seeds_and_its_fitness_is_theirs(schedule, tmp_path):
+    """'fixed': seeds 0, 1 for every trial (the paper's code); 'generation': new seeds each generation, shared by
+    its trials. A trial's per-seed fitness is what its Φ scores when trained again alone on its recorded seeds."""
+    config = dataclasses.replace(tiny(trials=8, popsize=4), seed_schedule=schedule)
+    study = open_study(f"sqlite:///{tmp_path}/s.db", "s", make_sampler("cmaes", 4, 0), encode_study_record(config))
+    evolve(study, config)
+    trials = study.trials
+    assert [t.state for t in trials] == [TrialState.COMPLETE] * 8
+    base = {"fixed": lambda g: [0, 1], "generation": lambda g: [100_000 + 2 * g, 100_001 + 2 * g]}[schedule]
+    assert [t.user_attrs["seeds"] for t in trials] == [base(t.user_attrs["generation"]) for t in trials]
+    assert sorted({t.user_attrs["generation"] for t in trials}) == [0, 1]
+    assert decode_study_record(study.user_attrs["ermrl"]).seed_schedule == schedule
+    last = trials[-1]
+    phi = Phi(*(np.asarray(last.user_attrs["phi"][k], np.float32) for k in ("sr", "lr", "iss")))
+    alone = train(config.train, Population.grid(phi, last.user_attrs["seeds"], config.train.ppo.learning_rate, 1))
+    np.testing.assert_allclose(alone.fitness(), last.user_attrs["seed_fitness"], rtol=1e-5)
 
 
 def test_divergent_candidate_is_failed_and_the_study_goes_on(tmp_path):

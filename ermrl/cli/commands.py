@@ -220,7 +220,7 @@ def cmd_evolve(args) -> int:
     config = EvolveConfig(train=options.train_config(args, env_ids[0]), space=options.search_space(args),
                           trials=args.trials, seeds=args.seeds, sampler=args.sampler, popsize=args.popsize,
                           sampler_seed=args.sampler_seed, envs=env_ids if len(env_ids) > 1 else (),
-                          normalization=args.normalization)
+                          normalization=args.normalization, seed_schedule=args.seed_schedule)
     worker = WorkerConfig(args.batch, args.worker_index, args.heartbeat_interval, args.grace_period)
     common.check_study_name(args.study)
     name = args.study or "+".join(env_ids) + f"-{args.reservoirs}res-{args.timesteps // 1000}k"

@@ -117,6 +117,7 @@ def _groups() -> dict[str, list[Option]]:
                           default="cmaes"),
                    Option("--popsize", EvolveConfig, "popsize", kwargs={"type": int}),
                    Option("--sampler-seed", EvolveConfig, "sampler_seed", kwargs={"type": int}),
+                   Option("--seed-schedule", EvolveConfig, "seed_schedule", kwargs={"choices": ["fixed", "generation"]}),
                    Option("--fixed-iss", SearchSpace, "fixed_iss", kwargs={"type": float}),
                    Option("--normalization", EvolveConfig, "normalization",
                           kwargs={"choices": ["episodic", "reference"]}), *space],

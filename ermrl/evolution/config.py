@@ -15,6 +15,11 @@ from ermrl.evolution.scoring import NORMALIZATIONS, Baseline
 from ermrl.training import TrainConfig
 
 
+SEED_SCHEDULES = ("fixed", "generation")
+GENERATION_SEEDS = 100_000
+"""The first seed of the 'generation' schedule, far from the test phases' (1000…) and selection's (2000…)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class EvolveConfig:
     """An evolution: what each candidate's training is, and how many candidates to try."""
@@ -30,6 +35,11 @@ class EvolveConfig:
     popsize: int | None = None
     """Trials per generation; None takes CMA-ES's default 4 + ⌊3 ln n⌋."""
     sampler_seed: int | None = 0
+    seed_schedule: str = "fixed"
+    """Which seeds (reservoir draws, policy inits, envs) evaluate a trial: 'fixed', seeds 0..S−1 for every trial
+    (the paper's code), or 'generation', new seeds for each generation, shared by its trials so that CMA-ES still
+    ranks them on the same draws (generation g: GENERATION_SEEDS + g·S .. + S−1), which keeps the evolution from
+    fitting Φ to S particular draws."""
     envs: tuple[str, ...] = ()
     """The envs the fitness is averaged over; empty means just ``train.env_id``."""
     normalization: str = "episodic"
@@ -44,6 +54,8 @@ class EvolveConfig:
                 raise ConfigError(f"--{name} must be >= 1, got {getattr(self, name)}")
         if self.popsize is not None and self.popsize < 2:
             raise ConfigError(f"--popsize must be >= 2 (CMA-ES needs at least 2 candidates a generation), got {self.popsize}")
+        if self.seed_schedule not in SEED_SCHEDULES:
+            raise ConfigError(f"unknown seed schedule {self.seed_schedule!r}; choose one of {', '.join(SEED_SCHEDULES)}")
         if self.normalization not in NORMALIZATIONS:
             raise ConfigError(f"unknown normalization {self.normalization!r}; choose one of {', '.join(NORMALIZATIONS)}")
         if len(set(self.env_ids)) != len(self.env_ids):
@@ -62,6 +74,13 @@ class EvolveConfig:
 
     def train_for(self, env_id: str) -> TrainConfig:
         return dataclasses.replace(self.train, env_id=env_id)
+
+    def trial_seeds(self, generation: int) -> list[int]:
+        """The S seeds of a trial of ``generation`` (see ``seed_schedule``)."""
+        if self.seed_schedule == "fixed":
+            return list(range(self.seeds))
+        start = GENERATION_SEEDS + generation * self.seeds
+        return list(range(start, start + self.seeds))
 
     @property
     def generation_size(self) -> int:

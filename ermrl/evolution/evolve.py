@@ -84,6 +84,7 @@ def tell_batch(study: optuna.Study, trials: list[optuna.Trial], results: dict[st
     for i, trial in enumerate(trials):
         try:
             trial.set_user_attr("phi", {k: v.reshape(n, seeds, -1)[i, 0].tolist() for k, v in first.phi.items()})
+            trial.set_user_attr("seeds", [int(v) for v in first.seeds.reshape(n, seeds)[i]])
             trial.set_user_attr("seed_fitness", _floats(scores.per_seed[i]))
             trial.set_user_attr("curve_final", _floats(finals[config.env_ids[0]][i]))
             if config.normalized:
@@ -151,8 +152,9 @@ def evolve(study: optuna.Study, config: EvolveConfig, trainers: dict[str, Traine
     failed_in_a_row = 0
     with Worker(study, config, worker or WorkerConfig(), log) as me:
         while (claim := me.claim()) is not None:
-            population = Population.grid(claim.phis, config.seeds, config.train.ppo.learning_rate,
-                                         config.space.reservoirs)
+            population = Population.concat([
+                Population.grid(phi, config.trial_seeds(g), config.train.ppo.learning_rate, config.space.reservoirs)
+                for phi, g in zip(claim.phis, claim.generations)])
             results = {}
             for env_id, trainer in trainers.items():
                 def report(p: Progress, env_id=env_id):

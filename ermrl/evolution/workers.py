@@ -86,6 +86,8 @@ class Claim:
     phis: list[Phi]
     generation: int
     """The (lowest) generation of the trials."""
+    generations: list[int]
+    """Each trial's generation."""
     completed: int
     """Completed trials in the study when they were claimed."""
 
@@ -207,7 +209,8 @@ class Worker:
             kept = [t for t in kept if self._survives(t, lambda t: t.set_user_attr(ATTR, placed[t.number]))]
         if not kept:
             return None
-        return Claim(kept, [phis[t.number] for t in kept], min(placed[t.number] for t in kept), completed)
+        return Claim(kept, [phis[t.number] for t in kept], min(placed[t.number] for t in kept),
+                     [placed[t.number] for t in kept], completed)
 
     def _adopt(self, trial: optuna.Trial) -> None:
         """Beats for a trial just asked, then names this worker in it (in this order: see

@@ -85,6 +85,14 @@ class Population:
         )
 
 
+    @staticmethod
+    def concat(parts: list["Population"]) -> "Population":
+        """The agents of ``parts``, in order, as one population (Φ with the same K in every part)."""
+        return Population(seeds=np.concatenate([p.seeds for p in parts]),
+                          phi=Phi(*(np.concatenate([getattr(p.phi, f) for p in parts]) for f in Phi._fields)),
+                          learning_rate=np.concatenate([p.learning_rate for p in parts]))
+
+
 class AgentState(NamedTuple):
     """Everything one agent carries between iterations."""
 
