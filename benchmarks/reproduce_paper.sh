@@ -152,10 +152,26 @@ PY
   .venv/bin/python benchmarks/peer_summary.py "$d" | tee "$d/paired.md"
 }
 
+step_seed_schedule() {  # C2's likely cause, the evolution's fixed seeds: CartPoleNoVel, 60 trials (the paper's trial
+  # budget), seeds 0-2 for every trial against new seeds each generation; each selected and tested 10 × 1M
+  local s d=docs/data/seed-schedule r
+  for s in generation fixed; do
+    r=runs/seed-schedule/$s
+    "$E" evolve --env CartPoleNoVel-v1 --trials 60 --seeds 3 --timesteps 300000 --fixed-iss 1.0 --seed-schedule "$s" \
+        --study "cartpole-1res-$s" --storage "$d/studies.log" --out "$r" --quiet
+    "$E" select --study "cartpole-1res-$s" --storage "$d/studies.log" --out "$r" --top 5 --seeds 5 --quiet
+    [ -f "$d/$s/test/summary.json" ] || {
+      "$E" test --study "cartpole-1res-$s" --storage "$d/studies.log" --out "$r" --seeds 10 --timesteps 1000000 --quiet
+      mkdir -p "$d/$s/test"
+      cp "$r"/test/{summary.json,summary.csv,curves.csv,test_config.json,test_phase.png} "$d/$s/test/"
+    }
+  done
+}
+
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium lunarlander probe h2 fft fft_early h3 humanoid hpmap peer)
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium lunarlander probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule)
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium lunarlander probe h2 fft fft_early h3 humanoid hpmap peer" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium lunarlander probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"
