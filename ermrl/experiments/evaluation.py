@@ -234,7 +234,7 @@ def _trained(partial: Path, name: str, labels: list[str], train_config, populati
         part_name = name if size == n else f"{name}.agents-{lo}-{hi - 1}"
         group = "" if size == n else f", agents {lo + 1}–{hi} of {n}" if hi - lo > 1 else f", agent {hi} of {n}"
         identity = _job_identity(name, labels, train_config, part)
-        results = checkpoints.load_job(partial, part_name, identity)
+        results = None if size == n else checkpoints.load_job(partial, part_name, identity)  # whole: looked above
         if results is not None:
             if log:
                 log(f"kept {shown}{group} from an earlier run ({partial / part_name}.npz)")
