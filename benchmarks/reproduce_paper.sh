@@ -21,7 +21,9 @@ collect() {
 
 # stash EXPERIMENT-SCALE: keep the finished models of unfinished test phases (OUT.partial/, a few MB) beside the
 # journal, so that a run stopped with its checkout (a fresh machine has no runs/) resumes from the repository; a
-# stashed folder goes once its test phase is written. restore EXPERIMENT-SCALE: the reverse, before a run.
+# stashed folder goes once its test phase is written. restore EXPERIMENT-SCALE: the reverse, before a run; it also
+# puts back the collected files of each finished test phase, so that `experiment run` on a fresh machine skips it
+# instead of training it again (its saved agents are not in the repository: steps that read them skip it too).
 stash() {
   local src=runs/experiments/$1 dst=docs/data/$1 p rel
   [ -d "$src" ] || return 0
@@ -37,6 +39,10 @@ restore() {
   while read -r p; do rel=${p#"$src"/}
     [ -d "$dst/$rel" ] || [ -f "$dst/${rel%.partial}/summary.json" ] || { mkdir -p "$dst/$rel"; cp -p "$p"/* "$dst/$rel/"; }
   done < <(find "$src" -type d -name '*.partial')
+  while read -r p; do rel=${p#"$src"/}; rel=${rel%/summary.json}
+    [ -f "$dst/$rel/summary.json" ] || { mkdir -p "$dst/$rel"; find "${p%/summary.json}" -maxdepth 1 -type f \
+        -exec cp -p {} "$dst/$rel/" \; ; }
+  done < <(find "$src" -path '*/test/summary.json')
 }
 
 run() {  # run EXPERIMENT SCALE ARGS...: one experiment at one scale, its journal under docs/data/
@@ -70,6 +76,7 @@ step_h2() {  # H2: Ant, HalfCheetah, Swimmer with 2 reservoirs, small evolution,
 step_fft() {  # H2: the rhythm of the test phases' ER-MRL and PPO agents
   for s in ant halfcheetah swimmer; do
     local t=runs/experiments/locomotion-small/$s-2res/test/agents
+    [ -d "$t" ] || [ ! -f "docs/data/locomotion-small/fft/$s.json" ] || continue  # done, and its agents are gone
     mkdir -p docs/data/locomotion-small/fft
     "$E" analyze fft "$t/ermrl" "$t/ppo" --max-steps 1000 --out "docs/data/locomotion-small/fft/$s.png"
   done
