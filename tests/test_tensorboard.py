@@ -2,6 +2,7 @@
 reader (EventAccumulator, from the `tensorboard` package of the test extra)."""
 
 import csv
+import dataclasses
 import subprocess
 import sys
 
@@ -17,7 +18,7 @@ from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_sampler, open_study
 from ermrl.storage import encode_study_record
 from ermrl.training import TrainConfig
-from ermrl.training.results import Episodes, Results
+from ermrl.training.results import WALL_S, Episodes, Results
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -80,7 +81,8 @@ def make_results(lengths: list[list[int]], ends: list[list[int]]) -> Results:
     a = len(eps)
     return Results(env_id="X-v0", total_timesteps=200, timesteps_per_iteration=100, seeds=np.arange(7, 7 + a),
                    phi={k: np.ones((a, 1)) for k in ("sr", "lr", "iss")}, learning_rate=np.full(a, 3e-4),
-                   episodes=eps, finite=np.ones(a, bool), metrics={"entropy": np.full((a, 2), 0.5)}, compile_s=1.0,
+                   episodes=eps, finite=np.ones(a, bool),
+                   metrics={"entropy": np.full((a, 2), 0.5), WALL_S: np.tile([0.5, 0.8], (a, 1))}, compile_s=1.0,
                    train_s=2.0)
 
 
@@ -88,10 +90,7 @@ def test_write_results_in_process(tmp_path):
     """No point before an agent's first episode; lengths averaged like returns; fps from the update times; a second
     write into the same folder makes new run folders instead of mixing events."""
     results = make_results([[5, 7, 9], [4]], [[150, 160, 190], [20]])
-    timing = tensorboard.Timing()
-    for elapsed in (0.5, 0.8):
-        timing(type("P", (), {"elapsed_s": elapsed})())
-    folders = tensorboard.write_results(tmp_path, results, "ER-MRL (1 reservoir)", timing.elapsed_s)
+    folders = tensorboard.write_results(tmp_path, results, "ER-MRL (1 reservoir)")
     assert [f.name for f in folders] == ["ER-MRL_1_reservoir_seed7", "ER-MRL_1_reservoir_seed8"]
     first, second = scalars(folders[0]), scalars(folders[1])
     assert first["rollout/ep_rew_mean"] == ([200], [pytest.approx(14.0)])  # no episode by step 100
@@ -99,14 +98,17 @@ def test_write_results_in_process(tmp_path):
     assert second["rollout/ep_len_mean"] == ([100, 200], [pytest.approx(4.0), pytest.approx(4.0)])
     assert first["time/fps"] == ([100, 200], [pytest.approx(200.0), pytest.approx(250.0)])
     assert first["train/entropy_loss"] == ([100, 200], [pytest.approx(-0.5)] * 2)
-    again = tensorboard.write_results(tmp_path, results, "ER-MRL (1 reservoir)")
+    saved_before = dataclasses.replace(results, metrics={"entropy": results.metrics["entropy"]})  # no update times
+    again = tensorboard.write_results(tmp_path, saved_before, "ER-MRL (1 reservoir)")
     assert [f.name for f in again] == ["ER-MRL_1_reservoir_seed7_2", "ER-MRL_1_reservoir_seed8_2"]
-    assert "time/fps" not in scalars(again[0])
+    assert "time/fps" not in scalars(again[0]) and "train/entropy_loss" in scalars(again[0])
 
 
-def test_test_phase_logs_every_model(tmp_path):
+@pytest.mark.parametrize("groups", [[], ["--agents-per-run", "1"]], ids=["whole", "one-agent-groups"])
+def test_test_phase_logs_every_model(groups, tmp_path):
     """`ermrl test --tensorboard` on a hand-made study: one run per model and seed, ep_rew_mean = curves.csv, and the
-    PPO diagnostics under train/* as `ermrl train --tensorboard` writes them."""
+    PPO diagnostics under train/* as `ermrl train --tensorboard` writes them; time/fps for every agent also when
+    each model trains one agent at a time (the agents of a model then have their own update times)."""
     url = str(tmp_path / "s.log")
     space = SearchSpace(fixed_iss=1.0)
     config = EvolveConfig(train=TrainConfig(env_id="CartPole-v1", total_timesteps=2048), space=space, trials=2, seeds=2,
@@ -115,7 +117,7 @@ def test_test_phase_logs_every_model(tmp_path):
     study.add_trial(create_trial(params={"sr": 0.9, "lr": 0.5}, distributions=space.distributions(), value=100.0))
     logs = tmp_path / "tb"
     r = ermrl("test", "--study", "s", "--storage", url, "--out", str(tmp_path / "out"), "--seeds", "2",
-              "--timesteps", "2048", "--tensorboard", str(logs), "--quiet")
+              "--timesteps", "2048", "--tensorboard", str(logs), *groups, "--quiet")
     assert r.returncode == 0, r.stderr
     expected = curves_csv(tmp_path / "out" / "test" / "curves.csv")
     models = sorted({m for m, _ in expected})
@@ -153,3 +155,19 @@ def test_tensorboard_at_a_file_is_one_line_and_exit_code_2(command, tmp_path):
 def test_help_shows_the_flag(command):
     r = ermrl(command, "--help")
     assert r.returncode == 0 and "--tensorboard DIR" in r.stdout and "rollout/ep_rew_mean" in r.stdout
+
+
+def test_groups_joined_keep_each_groups_update_times(tmp_path):
+    """A model joined from groups of agents (Results.concat) keeps each group's own update times, so each agent's
+    time/fps is its group's; joined with a group saved before update times were kept, it has no time/fps (rather
+    than one made up for the old group) and keeps the diagnostics that every group has."""
+    a, b = make_results([[5], [4]], [[150], [20]]), make_results([[6]], [[30]])
+    b.metrics[WALL_S] = np.array([[1.0, 2.0]])
+    b.seeds = np.array([9])
+    folders = tensorboard.write_results(tmp_path / "new", Results.concat([a, b]), "ER-MRL")
+    assert [scalars(f)["time/fps"][1] for f in folders] == [[pytest.approx(200.0), pytest.approx(250.0)]] * 2 + \
+        [[pytest.approx(100.0), pytest.approx(100.0)]]
+    old = dataclasses.replace(b, metrics={"entropy": b.metrics["entropy"]})
+    joined = Results.concat([a, old])
+    assert set(joined.metrics) == {"entropy"} and joined.metrics["entropy"].shape == (3, 2)
+    assert "time/fps" not in scalars(tensorboard.write_results(tmp_path / "old", joined, "ER-MRL")[2])

@@ -5,8 +5,9 @@ env-step count (summed over its envs, SB3's ``num_timesteps``). Tags, one point 
 
 - ``rollout/ep_rew_mean``, ``rollout/ep_len_mean``: mean return and length of the agent's last 100 episodes
   (:meth:`Results.curves`); no point before its first episode, as in SB3;
-- ``time/fps``: the agent's env steps per second of training since it started (compile excluded), from a
-  :class:`Timing` progress_fn; the agents of one population train together, so they share it;
+- ``time/fps``: the agent's env steps per second of training since it started (compile excluded), from the
+  update times the trainer keeps in ``Results.metrics`` (``WALL_S``); agents trained together share it, and a
+  model trained in groups of agents (``--agents-per-run``) has each group's own;
 - ``train/policy_gradient_loss``, ``train/value_loss``, ``train/entropy_loss``, ``train/approx_kl``,
   ``train/clip_fraction``: the PPO update's diagnostics, averaged over its epochs and minibatches.
 """
@@ -20,7 +21,6 @@ from pathlib import Path
 import numpy as np
 
 from ermrl import storage
-from ermrl.errors import ConfigError
 
 TRAIN_TAGS = {"policy_loss": ("train/policy_gradient_loss", 1.0), "value_loss": ("train/value_loss", 1.0),
               "entropy": ("train/entropy_loss", -1.0), "approx_kl": ("train/approx_kl", 1.0),
@@ -31,41 +31,6 @@ TRAIN_TAGS = {"policy_loss": ("train/policy_gradient_loss", 1.0), "value_loss": 
 def check_logdir(path: Path | str) -> Path:
     """``path`` if TensorBoard runs can be written there; one-line ConfigError otherwise (before any training)."""
     return storage.check_folder(path, "--tensorboard")
-
-
-class Timing:
-    """A ``progress_fn`` that records the training wall time at every update (for ``time/fps``); calls ``then``
-    (another progress_fn, e.g. a progress bar's) with each report too."""
-
-    def __init__(self, then=None):
-        self.then = then
-        self.elapsed_s: list[float] = []
-        """Seconds since training started (compile excluded), one per update so far."""
-
-    def __call__(self, progress) -> None:
-        self.elapsed_s.append(float(progress.elapsed_s))
-        if self.then is not None:
-            self.then(progress)
-
-
-class Timings:
-    """A progress factory (label -> progress_fn, as ``run_test_phase`` takes) that gives each population a
-    :class:`Timing` around ``then(label)``; ``elapsed_s`` {label: its update times}."""
-
-    def __init__(self, then=None):
-        self.then = then
-        self.elapsed_s: dict[str, list[float]] = {}
-
-    def __call__(self, label: str) -> Timing:
-        timing = Timing(self.then(label) if self.then is not None else None)
-        self.elapsed_s[label] = timing.elapsed_s
-        return timing
-
-    def of(self, label: str) -> list[float] | None:
-        """The update times of the population that trained the model ``label``: its own, or its first word's
-        (the ER-MRL models of several learning rates train as one population, "ER-MRL"); None when it did not
-        train here (e.g. kept from an earlier run)."""
-        return self.elapsed_s.get(label, self.elapsed_s.get(label.split(" ")[0]))
 
 
 def run_name(label: str, seed: int) -> str:
@@ -108,29 +73,30 @@ def write_scalars(logdir: Path | str, label: str, seeds, steps, scalars: dict[st
     return folders
 
 
-def fps(steps, elapsed_s) -> np.ndarray | None:
-    """(I,) env steps per second of one agent at each update, from the (I,) per-agent ``steps`` and the (I,)
-    training wall times of a :class:`Timing`; None when the timing does not cover every update."""
-    steps, elapsed = np.asarray(steps, np.float64), np.asarray(elapsed_s, np.float64)
-    if elapsed.shape != steps.shape:
+def fps(steps, wall_s) -> np.ndarray | None:
+    """(A, I) env steps per second of each agent at each update, from the (I,) per-agent ``steps`` and the (A, I)
+    training wall times (``Results.metrics[WALL_S]``); None when they do not cover every update."""
+    steps, wall = np.asarray(steps, np.float64), np.asarray(wall_s, np.float64)
+    if wall.ndim != 2 or wall.shape[1] != steps.shape[0]:
         return None
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(elapsed > 0, steps / elapsed, np.nan)
+        return np.where(wall > 0, steps / wall, np.nan)
 
 
-def results_scalars(results, elapsed_s=None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """(steps (I,), {tag: (A, I)}) of a :class:`~ermrl.training.results.Results`, with ``time/fps`` when
-    ``elapsed_s`` (a :class:`Timing`'s, (I,)) is given."""
-    from ermrl.training.results import Episodes
+def results_scalars(results) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(steps (I,), {tag: (A, I)}) of a :class:`~ermrl.training.results.Results`, with ``time/fps`` when its
+    metrics hold the update times (results saved before they were kept have none)."""
+    from ermrl.training.results import WALL_S, Episodes
 
     steps, rew = results.curves()
     # the same last-100 window over episode lengths: curves() of the episodes with their lengths as returns
     as_lengths = dataclasses.replace(results, episodes=[Episodes(e.timestep, e.length.astype(np.float64), e.length)
                                                         for e in results.episodes])
     scalars = {"rollout/ep_rew_mean": rew, "rollout/ep_len_mean": as_lengths.curves()[1]}
-    rate = fps(steps, elapsed_s) if elapsed_s is not None else None
-    if rate is not None:
-        scalars["time/fps"] = np.broadcast_to(rate, rew.shape)
+    wall = results.metrics.get(WALL_S)
+    rate = fps(steps, wall) if wall is not None else None
+    if rate is not None and rate.shape == rew.shape:
+        scalars["time/fps"] = rate
     for name, (tag, sign) in TRAIN_TAGS.items():
         m = results.metrics.get(name)
         if m is not None and np.shape(m) == rew.shape:
@@ -138,7 +104,7 @@ def results_scalars(results, elapsed_s=None) -> tuple[np.ndarray, dict[str, np.n
     return steps, scalars
 
 
-def write_results(logdir: Path | str, results, label: str, elapsed_s=None) -> list[Path]:
+def write_results(logdir: Path | str, results, label: str) -> list[Path]:
     """One run folder per agent of ``results`` (see the module doc); returns them in agent order."""
-    steps, scalars = results_scalars(results, elapsed_s)
+    steps, scalars = results_scalars(results)
     return write_scalars(logdir, label, results.seeds, steps, scalars)

@@ -155,15 +155,14 @@ def cmd_train(args) -> int:
     out = storage.check_folder(args.out or Path("runs") / f"train-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}")
 
     with TrainingBar(f"{args.env} × {args.seeds} seeds", enabled=not args.quiet) as bar:
-        timing = tensorboard.Timing(bar.update)
-        results = Trainer(config).run(population, timing)
+        results = Trainer(config).run(population, bar.update)
     with storage.staged_folder(out) as stage:  # all or nothing: summary.json, which marks it complete, last
         run = storage.write_train_run(stage, config, results, label, options.effective(args))
         if args.save_agents:
             agent_files.write_agents(run.folder / agent_files.AGENTS_DIR, config, results, label)
         learning_curves({label: results.curves()}, f"{results.env_id}: {label}", run.figure)
     if args.tensorboard is not None:
-        tensorboard.write_results(args.tensorboard, results, label, timing.elapsed_s)
+        tensorboard.write_results(args.tensorboard, results, label)
     fit = results.fitness()
     for seed, f in zip(results.seeds, fit):
         print(f"seed {seed}: fitness {f:.2f} (mean return of the last 10 training episodes)")
@@ -305,17 +304,16 @@ def cmd_test(args) -> int:
     storage.decode_study_record(study.user_attrs[ATTR])
     out = storage.check_folder(test_dir(common.run_dir(args), study.user_attrs[ATTR], test.env_id))
     progress, close = common.bars(args.quiet)
-    timings = tensorboard.Timings(progress)  # the bars, and each population's update times for time/fps
     models: list = []  # (label, Results) of every model, for TensorBoard
     try:
-        rows = run_test_phase(study, out, test, timings, save_agents=args.save_agents, log=print,
+        rows = run_test_phase(study, out, test, progress, save_agents=args.save_agents, log=print,
                               on_results=lambda label, results: models.append((label, results)),
                               agents_per_run=args.agents_per_run)
     finally:
         close()
     if args.tensorboard is not None:
         for label, results in models:
-            tensorboard.write_results(args.tensorboard, results, label, timings.of(label))
+            tensorboard.write_results(args.tensorboard, results, label)
     print(f"Φ*: {rows[0]['phi_choice']}; evolved on {', '.join(rows[0]['evolved_on'])}; tested on {rows[0]['env_id']}")
     for r in rows:
         div = f"  ({r['diverged']} diverged)" if r["diverged"] else ""

@@ -16,6 +16,8 @@ FITNESS_EPISODES = 10
 """Episodes averaged for an agent's fitness (paper: "the final 10 episodes")."""
 CURVE_WINDOW = 100
 """Episodes averaged per curve point, like SB3's ``rollout/ep_rew_mean`` that the paper's curves plot."""
+WALL_S = "wall_s"
+"""The ``Results.metrics`` name of the training wall time at each update (for TensorBoard's ``time/fps``)."""
 
 
 @dataclasses.dataclass
@@ -95,7 +97,8 @@ class Results:
     finite: np.ndarray
     """(A,) bool: False when the agent's parameters or losses became NaN/inf (diverged)."""
     metrics: dict
-    """name -> (A, n_iterations) PPO diagnostics."""
+    """name -> (A, n_iterations) PPO diagnostics, and ``WALL_S``: the training seconds (compile excluded) at the
+    end of each update, the same for the agents that trained together (absent from results saved before it)."""
     compile_s: float
     train_s: float
     policies: Policies | None = None
@@ -180,7 +183,7 @@ class Results:
             first, seeds=cat(*(p.seeds for p in parts)), phi={k: cat(*(p.phi[k] for p in parts)) for k in first.phi},
             learning_rate=cat(*(p.learning_rate for p in parts)), episodes=[e for p in parts for e in p.episodes],
             finite=cat(*(p.finite for p in parts)),
-            metrics={k: cat(*(p.metrics[k] for p in parts)) for k in first.metrics},
+            metrics={k: cat(*(p.metrics[k] for p in parts)) for k in first.metrics if all(k in p.metrics for p in parts)},
             compile_s=sum(p.compile_s for p in parts), train_s=sum(p.train_s for p in parts), policies=policies)
 
     def agent_steps_per_s(self) -> float:

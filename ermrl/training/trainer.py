@@ -25,7 +25,7 @@ from ermrl.ppo import update as ppo_update
 from ermrl.ppo.config import PPOConfig
 from ermrl.ppo.losses import Batch, bootstrapped_gae
 from ermrl.ppo.networks import ActorCritic
-from ermrl.training.results import Policies, Results
+from ermrl.training.results import WALL_S, Policies, Results
 from ermrl.envs import HostEnv, JaxEnv
 from ermrl.training.rollout import EnvCarry, Step, collect, start, start_from_obs
 
@@ -267,11 +267,12 @@ class Trainer:
             state, log = compiled(state)
             ret, length = np.asarray(log.finished_return)[:n], np.asarray(log.finished_length)[:n]
             finished.append((ret, length))
-            metrics.append({k: np.asarray(v)[:n] for k, v in log.metrics.items()})
             finite &= np.asarray(log.finite)[:n]
+            elapsed = time.perf_counter() - t1  # after the transfers above: this update is done
+            metrics.append({**{k: np.asarray(v)[:n] for k, v in log.metrics.items()}, WALL_S: np.full(n, elapsed)})
             if progress_fn is not None:
                 progress_fn(Progress(it + 1, self.n_iterations, (it + 1) * steps_per_iter * n,
-                                     self.n_iterations * steps_per_iter * n, time.perf_counter() - t1, compile_s))
+                                     self.n_iterations * steps_per_iter * n, elapsed, compile_s))
         return finished, metrics, finite, state
 
     def run(self, population: Population, progress_fn: Callable[[Progress], None] | None = None) -> Results:
