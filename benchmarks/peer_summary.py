@@ -56,21 +56,16 @@ def load_pairs(folder: Path) -> dict[str, tuple[dict[int, float], dict[int, floa
 
 def row(name: str, sb3: np.ndarray, erm: np.ndarray, seeds: str) -> str:
     """One Markdown row: name | seeds | n | SB3 | ermrl | SB3 − ermrl [95% CI] | Wilcoxon p."""
-    from scipy import stats
+    from ermrl.analysis.statistics import format_ci, paired_difference, summarize
 
-    from ermrl.analysis.statistics import format_ci, summarize
-
-    diff = sb3 - erm
-    ci = stats.bootstrap((diff,), np.mean, n_resamples=10000, method="BCa", random_state=0).confidence_interval
-    nonzero = diff[diff != 0]  # Wilcoxon drops ties (both at the 500 ceiling)
-    p = stats.wilcoxon(nonzero).pvalue if len(nonzero) >= 2 else float("nan")
+    d = paired_difference(sb3, erm)  # Wilcoxon drops ties (both at the 500 ceiling)
 
     def cell(x):
         s = summarize(x)
         return f"{s.mean:.1f} ± {s.std:.1f}; IQM {format_ci(s.iqm, s.iqm_low, s.iqm_high)}"
 
-    return (f"| {name} | {seeds} | {len(diff)} | {cell(sb3)} | {cell(erm)} | "
-            f"{diff.mean():+.1f} [{ci.low:+.1f}, {ci.high:+.1f}] | {p:.2f} |")
+    return (f"| {name} | {seeds} | {d.n} | {cell(sb3)} | {cell(erm)} | "
+            f"{d.mean:+.1f} [{d.low:+.1f}, {d.high:+.1f}] | {d.p:.2f} |")
 
 
 def main(argv=None) -> int:

@@ -83,9 +83,15 @@ def test_cli_context_and_fft_on_saved_agents(tmp_path):
     lines = fig.with_suffix(".md").read_text().splitlines()
     assert [line.split(" | ")[1] for line in lines[2:]] == ["2", "2"]
     ppo = lines[3].rstrip(" |").split(" | ")
-    assert ppo[0].endswith("ppo") and ppo[3] == ppo[4]
+    assert ppo[0].endswith("ppo") and ppo[3] == ppo[4] and ppo[5] == "—"  # no context to compare
     rows = json.loads(fig.with_suffix(".json").read_text())
     assert len(rows) == 4 and all(0 <= row["rhythm_input"] <= 1 and row["steps"] == 200 for row in rows)
+    # the ER-MRL row's paired input − observation, over its 2 agents, from the per-agent scores
+    from ermrl.analysis.statistics import paired_difference
+
+    mine = [row for row in rows if row["run"].endswith("ermrl")]
+    paired = paired_difference([row["rhythm_input"] for row in mine], [row["rhythm_observation"] for row in mine])
+    assert lines[2].rstrip(" |").split(" | ")[5] == str(paired) and paired.n == 2
     assert fig.read_bytes().startswith(b"\x89PNG")
     for args, message in [
         (["fft", str(tmp_path / "nothing"), "--out", str(fig)],

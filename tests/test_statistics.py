@@ -1,4 +1,4 @@
-"""The statistics equal rliable's own on fixed arrays, and count diverged seeds."""
+"""The statistics equal rliable's (and SciPy's) own on fixed arrays, and count diverged seeds."""
 
 import numpy as np
 import pytest
@@ -59,6 +59,27 @@ def test_aggregate_iqm_over_tasks_equals_rliables(tmp_path):
         assert ours[m] == pytest.approx(rliable_iqm(s, 300, 4), abs=1e-12)
     path = statistics.performance_profile(scores, tmp_path / "profile.png", reps=100)
     assert path.read_bytes()[:8] == PNG
+
+
+def test_paired_difference_equals_scipys_and_drops_unfinished_pairs():
+    """Mean of x − y with SciPy's BCa bootstrap CI and Wilcoxon p on the same differences; a pair with a diverged
+    value is left out; zero differences (two scores at a ceiling) count in the mean but not in Wilcoxon."""
+    x, y = SCORES[:8] + 15.0, SCORES[4:]
+    d = statistics.paired_difference(x, y, reps=2000, seed=5)
+    ci = scipy.stats.bootstrap((x - y,), np.mean, n_resamples=2000, method="BCa", random_state=5).confidence_interval
+    assert (d.n, d.mean, d.low, d.high) == (8, pytest.approx((x - y).mean()), pytest.approx(ci.low),
+                                            pytest.approx(ci.high))
+    assert d.p == pytest.approx(scipy.stats.wilcoxon(x - y).pvalue) and d.n_above == int((x > y).sum())
+    tied = statistics.paired_difference([500.0, 500.0, 300.0, None, 420.0], [500.0, 480.0, 250.0, 10.0, 400.0])
+    assert (tied.n, tied.mean, tied.n_above) == (4, pytest.approx(22.5), 3)
+    assert tied.p == pytest.approx(scipy.stats.wilcoxon([20.0, 50.0, 20.0]).pvalue)
+    same = statistics.paired_difference([2.0, 3.0], [1.0, 2.0])
+    assert (same.mean, same.low, same.high) == (1.0, 1.0, 1.0)
+    assert str(same) == "+1 [+1, +1], Wilcoxon p = 0.50, 2 of 2 above"
+    with pytest.raises(ValueError, match="at least 2 finite pairs, got 1"):
+        statistics.paired_difference([1.0, None], [0.0, 1.0])
+    with pytest.raises(ValueError, match=r"the same length, got \(2,\) and \(3,\)"):
+        statistics.paired_difference([1.0, 2.0], [1.0, 2.0, 3.0])
 
 
 def test_format_ci():

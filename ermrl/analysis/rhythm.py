@@ -124,10 +124,13 @@ def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0
                  max_steps: int | None = None) -> tuple[str, list[dict]]:
     """Rhythm of every saved agent of each named source (label -> agent files, e.g. a test phase's ER-MRL and
     PPO agents). Returns a Markdown table (one row per source: the mean ± std over its agents of the rhythm of the
-    summed observation and of the summed policy input) and the per-agent rows; plots the spectra of the first
-    agent of each source at ``path``."""
-    rows, lines = [], ["| run | agents | episode steps | rhythm, summed observation | rhythm, summed policy input |",
-                       "|---|---:|---:|---|---|"]
+    summed observation and of the summed policy input, and for agents with reservoirs the paired difference input −
+    observation over its agents, the paper's "the context is more rhythmic than the observation") and the
+    per-agent rows; plots the spectra of the first agent of each source at ``path``."""
+    from ermrl.analysis.statistics import paired_difference
+
+    rows, lines = [], ["| run | agents | episode steps | rhythm, summed observation | rhythm, summed policy input "
+                       "| input − observation, paired [95% CI] |", "|---|---:|---:|---|---|---|"]
     signals = {}
     for label, files in sources.items():
         if not files:
@@ -136,8 +139,9 @@ def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0
         rows += found
         obs, inp = (np.array([r[k] for r in found]) for k in ("rhythm_observation", "rhythm_input"))
         steps = np.mean([r["steps"] for r in found])
+        paired = str(paired_difference(inp, obs)) if found[0]["reservoirs"] and len(found) >= 2 else "—"
         lines.append(f"| {label} | {len(found)} | {steps:.0f} | {obs.mean():.3f} ± {obs.std():.3f} | "
-                     f"{inp.mean():.3f} ± {inp.std():.3f} |")
+                     f"{inp.mean():.3f} ± {inp.std():.3f} | {paired} |")
         short = Path(label).name or label
         signals[f"{short}: summed observation"] = found[0]["summed_observation"]
         if found[0]["reservoirs"]:

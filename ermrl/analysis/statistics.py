@@ -2,7 +2,8 @@
 
 - the interquartile mean (IQM) with a 95% stratified-bootstrap confidence interval (percentile method);
 - the probability of improvement P(X > Y) of one model over another, with its CI;
-- the aggregate IQM over several tasks' normalized scores, and performance profiles.
+- the aggregate IQM over several tasks' normalized scores, and performance profiles;
+- the paired difference of two measurements of the same runs (SciPy: BCa bootstrap CI, Wilcoxon signed-rank).
 
 Seeds that diverged (None or NaN) are counted in ``n_diverged`` and left out of the statistics, never silently.
 rliable (with pandas and arch) is imported inside the functions: it is slow to import.
@@ -118,6 +119,49 @@ def probability_of_improvement(x, y, reps: int = 2000, seed: int = 0) -> tuple[f
                                                          random_state=_rng(seed))
     low, high = np.ravel(interval["xy"])
     return float(np.ravel(point["xy"])[0]), float(low), float(high)
+
+
+@dataclasses.dataclass(frozen=True)
+class PairedDifference:
+    """x − y over paired runs (the same seed, or the same agent measured twice)."""
+
+    n: int
+    """Pairs with both values finite (the others are left out)."""
+    mean: float
+    low: float
+    high: float
+    """The mean difference's 95% bootstrap CI (SciPy, BCa, 10,000 resamples)."""
+    p: float
+    """Wilcoxon signed-rank p-value (SciPy; zero differences, e.g. two scores at a ceiling, are dropped); NaN with
+    fewer than 2 non-zero differences."""
+    n_above: int
+    """Pairs where x > y."""
+
+    def __str__(self) -> str:
+        return (f"{self.mean:+.3g} [{self.low:+.3g}, {self.high:+.3g}], Wilcoxon p = {self.p:.2f}, "
+                f"{self.n_above} of {self.n} above")
+
+
+def paired_difference(x, y, reps: int = 10_000, seed: int = 0) -> PairedDifference:
+    """The paired difference x − y of two (n,) sequences (None/NaN: left out with its pair), with the BCa CI of
+    its mean and the Wilcoxon signed-rank p-value. ValueError with fewer than 2 finite pairs."""
+    from scipy import stats
+
+    a, b = (np.array([np.nan if v is None else v for v in v_], float) for v_ in (x, y))
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"paired values need two sequences of the same length, got {a.shape} and {b.shape}")
+    diff = (a - b)[np.isfinite(a) & np.isfinite(b)]
+    if len(diff) < 2:
+        raise ValueError(f"a paired difference needs at least 2 finite pairs, got {len(diff)}")
+    if np.all(diff == diff[0]):  # nothing varies: BCa is undefined, and the CI is the point
+        low = high = float(diff[0])
+    else:
+        ci = stats.bootstrap((diff,), np.mean, n_resamples=reps, method="BCa", confidence_level=CONFIDENCE,
+                             random_state=seed).confidence_interval
+        low, high = float(ci.low), float(ci.high)
+    nonzero = diff[diff != 0]
+    p = float(stats.wilcoxon(nonzero).pvalue) if len(nonzero) >= 2 else float("nan")
+    return PairedDifference(len(diff), float(diff.mean()), low, high, p, int((diff > 0).sum()))
 
 
 def aggregate_iqm(scores: dict[str, np.ndarray], reps: int = 2000, seed: int = 0) -> dict[str, tuple[float, float, float]]:
