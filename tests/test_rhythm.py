@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from ermrl import reservoir
-from ermrl.analysis.rhythm import plot_spectra, rhythm_score, spectrum, summed
+from ermrl.analysis.rhythm import DRIFT_CYCLES, peak_cycles, plot_spectra, rhythm_score, spectrum, summed
 from ermrl.errors import ConfigError
 
 T = 1024
@@ -29,6 +29,17 @@ def test_sine_scores_near_one_and_white_noise_near_zero():
     noise = [rhythm_score(rng.standard_normal(T)) for _ in range(10)]
     assert max(noise) < 0.1  # measured 0.016..0.037; the band holds 5 of 512 bins
     assert rhythm_score(np.full(T, 2.0)) == 0.0
+
+
+def test_a_slow_drift_scores_like_a_rhythm_and_its_peak_shows_it():
+    """A ramp, or one slow swing over the window, puts its power in the lowest bins and scores ~1 like a sine;
+    peak_cycles tells them apart: 7 cycles for a 7-cycle sine, below DRIFT_CYCLES for the drifts."""
+    sine = np.sin(2 * np.pi * 7 * STEPS / T + 0.3)
+    ramp, swing = STEPS / T, np.sin(np.pi * STEPS / T)
+    assert peak_cycles(sine) == 7 and peak_cycles(np.full(T, 2.0)) == 0
+    for drift in (ramp, swing):
+        assert rhythm_score(drift) > 0.95 and 0 < peak_cycles(drift) < DRIFT_CYCLES
+    assert peak_cycles(swing + 0.1 * sine) == 1 and peak_cycles(0.2 * swing + sine) == 7  # whichever dominates
 
 
 def test_a_reservoir_driven_by_a_sine_is_more_rhythmic_than_one_driven_by_noise():
@@ -84,6 +95,7 @@ def test_cli_context_and_fft_on_saved_agents(tmp_path):
     assert [line.split(" | ")[1] for line in lines[2:]] == ["2", "2"]
     ppo = lines[3].rstrip(" |").split(" | ")
     assert ppo[0].endswith("ppo") and ppo[3] == ppo[4] and ppo[5] == "—"  # no context to compare
+    assert ppo[6].split(" / ")[0] == ppo[6].split(" / ")[1]  # the same signal: the same drifts
     rows = json.loads(fig.with_suffix(".json").read_text())
     assert len(rows) == 4 and all(0 <= row["rhythm_input"] <= 1 and row["steps"] == 200 for row in rows)
     # the ER-MRL row's paired input − observation, over its 2 agents, from the per-agent scores
@@ -92,6 +104,8 @@ def test_cli_context_and_fft_on_saved_agents(tmp_path):
     mine = [row for row in rows if row["run"].endswith("ermrl")]
     paired = paired_difference([row["rhythm_input"] for row in mine], [row["rhythm_observation"] for row in mine])
     assert lines[2].rstrip(" |").split(" | ")[5] == str(paired) and paired.n == 2
+    drifts = sum(0 < row["peak_cycles_observation"] < DRIFT_CYCLES for row in mine)
+    assert lines[2].rstrip(" |").split(" | ")[6] == f"{drifts} / {sum(0 < r['peak_cycles_input'] < DRIFT_CYCLES for r in mine)}"
     assert fig.read_bytes().startswith(b"\x89PNG")
     for args, message in [
         (["fft", str(tmp_path / "nothing"), "--out", str(fig)],

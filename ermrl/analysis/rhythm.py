@@ -14,6 +14,13 @@ a value in [0, 1]. The Hann window keeps a sine's power inside its main lobe (±
 falls between bins: a pure sine scores ~1 with the default half_width 2. White noise spreads its power evenly,
 so it scores about (2·half_width + 1) / (T/2), a little more since the peak is the largest of its bins. A constant
 signal (no power off DC) scores 0.
+
+A slow drift also scores ~1: a signal that wanders once over the window (a swimmer slowly turning, a ramp) puts
+its power in the lowest bins, and that is one narrow band, but not a gait. :func:`peak_cycles` gives the peak's
+bin, i.e. how many times the dominant component repeats in the window; the tables flag a peak below
+``DRIFT_CYCLES`` as a drift, so that such a score is not read as a rhythm. (Cutting those bins off does not fix
+the score: a large drift leaks into the next bins through the window's main lobe, so the result would hinge on
+the cut.)
 """
 
 from __future__ import annotations
@@ -26,6 +33,8 @@ from ermrl.errors import ConfigError
 
 HALF_WIDTH = 2
 """Default half width, in bins, of the band around the peak that :func:`rhythm_score` counts."""
+DRIFT_CYCLES = 3
+"""A dominant peak repeating fewer times than this in the window is flagged as a drift, not a rhythm."""
 
 
 def _as_signal(signal, name: str = "signal") -> np.ndarray:
@@ -62,6 +71,13 @@ def rhythm_score(signal: np.ndarray, half_width: int = HALF_WIDTH) -> float:
     peak = int(np.argmax(power))
     band = power[max(0, peak - half_width): peak + half_width + 1]
     return float(min(1.0, band.sum() / total))
+
+
+def peak_cycles(signal: np.ndarray) -> int:
+    """The dominant non-DC bin of a (T,) signal's spectrum: how many cycles of its strongest component fit in the
+    T samples (0 for a constant signal). Below ``DRIFT_CYCLES`` the peak is a drift, not a rhythm."""
+    _, power = spectrum(signal)
+    return int(np.argmax(power[1:]) + 1) if power[1:].sum() > 0.0 else 0
 
 
 def summed(traces: np.ndarray) -> np.ndarray:
@@ -117,7 +133,8 @@ def agent_rhythm(agent_file: Path | str, seed: int = 0, max_steps: int | None = 
     o, c = summed(obs), summed(context)
     return {"agent": str(agent_file), "env_id": agent.env_id, "reservoirs": agent.config.reservoirs,
             "steps": len(obs), "return": float(rewards.sum()), "rhythm_observation": rhythm_score(o),
-            "rhythm_input": rhythm_score(c), "summed_observation": o, "summed_input": c}
+            "rhythm_input": rhythm_score(c), "peak_cycles_observation": peak_cycles(o), "peak_cycles_input":
+            peak_cycles(c), "summed_observation": o, "summed_input": c}
 
 
 def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0,
@@ -125,12 +142,14 @@ def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0
     """Rhythm of every saved agent of each named source (label -> agent files, e.g. a test phase's ER-MRL and
     PPO agents). Returns a Markdown table (one row per source: the mean ± std over its agents of the rhythm of the
     summed observation and of the summed policy input, and for agents with reservoirs the paired difference input −
-    observation over its agents, the paper's "the context is more rhythmic than the observation") and the
-    per-agent rows; plots the spectra of the first agent of each source at ``path``."""
+    observation over its agents, the paper's "the context is more rhythmic than the observation"; and how many
+    agents' peaks are drifts, observation / input) and the per-agent rows; plots the spectra of the first agent of
+    each source at ``path``."""
     from ermrl.analysis.statistics import paired_difference
 
     rows, lines = [], ["| run | agents | episode steps | rhythm, summed observation | rhythm, summed policy input "
-                       "| input − observation, paired [95% CI] |", "|---|---:|---:|---|---|---|"]
+                       f"| input − observation, paired [95% CI] | drifts (peak < {DRIFT_CYCLES} cycles), obs / input |",
+                       "|---|---:|---:|---|---|---|---|"]
     signals = {}
     for label, files in sources.items():
         if not files:
@@ -141,10 +160,17 @@ def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0
         steps = np.mean([r["steps"] for r in found])
         paired = str(paired_difference(inp, obs)) if found[0]["reservoirs"] and len(found) >= 2 else "—"
         lines.append(f"| {label} | {len(found)} | {steps:.0f} | {obs.mean():.3f} ± {obs.std():.3f} | "
-                     f"{inp.mean():.3f} ± {inp.std():.3f} | {paired} |")
+                     f"{inp.mean():.3f} ± {inp.std():.3f} | {paired} | {_drifts(found, 'observation')} / "
+                     f"{_drifts(found, 'input')} |")
         short = Path(label).name or label
         signals[f"{short}: summed observation"] = found[0]["summed_observation"]
         if found[0]["reservoirs"]:
             signals[f"{short}: summed context"] = found[0]["summed_input"]
     plot_spectra(signals, path)
     return "\n".join(lines) + "\n", [{k: v for k, v in r.items() if not k.startswith("summed")} for r in rows]
+
+
+def _drifts(rows: list[dict], signal: str) -> int:
+    """How many of ``rows`` (agent_rhythm's) have their ``signal``'s peak below DRIFT_CYCLES (a constant's, 0,
+    is no drift)."""
+    return sum(0 < r[f"peak_cycles_{signal}"] < DRIFT_CYCLES for r in rows)
