@@ -88,6 +88,7 @@ step_fft_early() {  # H2, C9 ("very early in the learning process"): Φ* and PPO
     local t=runs/experiments/locomotion-small-early/$s/test/agents
     "$E" analyze fft "$t/ermrl" "$t/ppo" --max-steps 1000 --out "docs/data/locomotion-small/fft/${s}_100k.png"
   done
+  collect locomotion-small-early  # the 100k test phases' summaries and curves
 }
 step_h3() {  # H3: evolved on two of Ant/HalfCheetah/Swimmer, tested on the third (10 × 1M)
   run generalization-morphology small "${TEST10[@]}"
