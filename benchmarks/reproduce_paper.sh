@@ -90,8 +90,9 @@ step_fft_early() {  # H2, C9 ("very early in the learning process"): Φ* and PPO
   done
   collect locomotion-small-early  # the 100k test phases' summaries and curves
 }
-step_h3() {  # H3: evolved on two of Ant/HalfCheetah/Swimmer, tested on the third (10 × 1M)
-  run generalization-morphology small "${TEST10[@]}"
+step_h3() {  # H3: evolved on two of Ant/HalfCheetah/Swimmer, tested on the third (10 × 1M); a model (≈ 1 h on
+  # a host env) is kept 5 agents at a time, so that the step resumes across sittings
+  run generalization-morphology small "${TEST10[@]}" --test-agents-per-run 5
 }
 step_humanoid() {  # H3: Humanoid <-> HumanoidStandup, small evolution and test
   run generalization-humanoid small
