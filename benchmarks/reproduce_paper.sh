@@ -64,6 +64,12 @@ step_pendulum() {  # H1: PendulumNoVel, small evolution, test 10 × 1M
 }
 step_pendulum_medium() {  # H1: the same at the paper's per-trial budget (small's 50k-step trials select noise there)
   run partial-observability medium --only pendulum-1res
+  # the default Φ (0.95, 0.5, 1) at the evolution's budget (300k, lr 3e-4), on its seeds 0-2 and on the selection's
+  local d=docs/data/partial-observability-medium/default-phi
+  [ -f "$d/seeds0to2/summary.json" ] || "$E" train --env PendulumNoVel-v1 --seeds 3 --timesteps 300000 \
+      --no-save-agents --quiet --out "$d/seeds0to2"
+  [ -f "$d/seeds2000to2004/summary.json" ] || "$E" train --env PendulumNoVel-v1 --seeds 5 --first-seed 2000 \
+      --timesteps 300000 --no-save-agents --quiet --out "$d/seeds2000to2004"
 }
 step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution, test 10 × 3M at lr 1e-4
   # a model (10 agents × 3M host steps) takes longer than one sitting here: train and keep it 5 agents at a time
