@@ -42,7 +42,7 @@ restore() {
   while read -r p; do rel=${p#"$src"/}; rel=${rel%/summary.json}
     [ -f "$dst/$rel/summary.json" ] || { mkdir -p "$dst/$rel"; find "${p%/summary.json}" -maxdepth 1 -type f \
         -exec cp -p {} "$dst/$rel/" \; ; }
-  done < <(find "$src" -path '*/test/summary.json')
+  done < <(find "$src" \( -path '*/test/summary.json' -o -path '*/test-*/summary.json' \))  # test-ENV: on another env
 }
 
 run() {  # run EXPERIMENT SCALE ARGS...: one experiment at one scale, its journal under docs/data/
