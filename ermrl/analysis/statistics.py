@@ -40,9 +40,16 @@ def _seeded(seed: int):
         np.random.set_state(state)
 
 
+def _floats(values) -> np.ndarray:
+    """``values`` (any shape, None for a diverged seed) as a float array of the same shape, None -> NaN."""
+    shape = np.shape(values)
+    return np.array([np.nan if v is None else v for v in np.ravel(np.asarray(values, dtype=object))],
+                    float).reshape(shape)
+
+
 def _finite(scores) -> tuple[np.ndarray, int]:
     """(finite scores (m,), number of non-finite entries) of a 1-D sequence with None/NaN for diverged seeds."""
-    x = np.array([np.nan if v is None else v for v in np.ravel(np.asarray(scores, dtype=object))], float)
+    x = np.ravel(_floats(scores))
     ok = np.isfinite(x)
     return x[ok], int((~ok).sum())
 
@@ -102,8 +109,7 @@ def probability_of_improvement(x, y, reps: int = 2000, seed: int = 0) -> tuple[f
     from rliable import library, metrics
 
     def clean(a):
-        shape = np.shape(a)
-        a = np.array([np.nan if v is None else v for v in np.ravel(np.asarray(a, dtype=object))], float).reshape(shape)
+        a = _floats(a)
         a = a[:, None] if a.ndim == 1 else a
         return a[np.isfinite(a).all(axis=1)]
 
@@ -147,7 +153,7 @@ def paired_difference(x, y, reps: int = 10_000, seed: int = 0) -> PairedDifferen
     its mean and the Wilcoxon signed-rank p-value. ValueError with fewer than 2 finite pairs."""
     from scipy import stats
 
-    a, b = (np.array([np.nan if v is None else v for v in v_], float) for v_ in (x, y))
+    a, b = _floats(x), _floats(y)
     if a.shape != b.shape or a.ndim != 1:
         raise ValueError(f"paired values need two sequences of the same length, got {a.shape} and {b.shape}")
     diff = (a - b)[np.isfinite(a) & np.isfinite(b)]
