@@ -80,6 +80,23 @@ step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution,
   run partial-observability small --only lunarlander-2res --test-seeds 10 --test-timesteps 3000000 --test-lrs 1e-4 \
       --test-agents-per-run 5
 }
+step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study's small evolution and selection
+  # with one reservoir, its Φ* trained on the test seeds (1000-1009, 3M steps, lr 1e-4) in two parts of 5 seeds
+  # (≈ 1 h each here), ER-MRL only (the PPO baselines are the 2-reservoir test phase's), then compared
+  local d=docs/data/c3-lunarlander r=runs/c3-lunarlander phi first
+  "$E" evolve --env LunarLanderNoVel-v3 --reservoirs 1 --fixed-iss 1.0 --trials 18 --seeds 2 --timesteps 50000 \
+      --study lunarlander-1res --storage "$d/studies.log" --out "$r" --quiet
+  "$E" select --study lunarlander-1res --storage "$d/studies.log" --out "$r" --top 3 --seeds 3 --quiet
+  phi=$(phi_flags "$d/studies.log" lunarlander-1res)
+  for first in 1000 1005; do
+    # shellcheck disable=SC2086
+    [ -f "$d/ermrl-1res-$first/summary.json" ] || "$E" train --env LunarLanderNoVel-v3 $phi --seeds 5 \
+        --first-seed "$first" --timesteps 3000000 --ppo-lr 1e-4 --no-save-agents --quiet --out "$d/ermrl-1res-$first"
+  done
+  local two=docs/data/partial-observability-small/lunarlander-2res/test/summary.json
+  [ -f "$two" ] || { echo "C3: the 2-reservoir test phase is not done yet (step lunarlander)"; return 0; }
+  .venv/bin/python benchmarks/reservoir_count_summary.py "$two" "$d" | tee "$d/summary.md"
+}
 step_h2() {  # H2: Ant, HalfCheetah, Swimmer with 2 reservoirs, small evolution, test 10 × 1M against PPO
   run locomotion small --only ant-2res halfcheetah-2res swimmer-2res "${TEST10[@]}"
 }
@@ -124,18 +141,23 @@ step_probe() {  # H1, C4: velocity R² of each H1 study's Φ*, against the defau
         --out "docs/data/$data/probe/$name.png"
   done
 }
-step_peer() {  # peer agreement: the CartPole Φ* trained 10 × 300k by SB3 + ReservoirPy and by ermrl, then paired
-  local phi d=docs/data/partial-observability-paper/peer
-  phi=$(.venv/bin/python - <<'PY'
+phi_flags() {  # phi_flags STORAGE STUDY: the study's Φ* (selected, else best) as `--sr .. --lr .. --iss ..`
+  .venv/bin/python - "$1" "$2" <<'PY'
+import sys
+
 from ermrl import storage
 from ermrl.evolution.selection import chosen_trial
 from ermrl.evolution.study import ATTR, load_study
 
-study = load_study("docs/data/partial-observability-paper/studies.log", "partial-observability-paper-cartpole-1res")
+study = load_study(sys.argv[1], sys.argv[2])
 trial, phi, how = chosen_trial(study, storage.decode_study_record(study.user_attrs[ATTR]), None)
-print(f"--sr {float(phi.sr[0])!r} --lr {float(phi.lr[0])!r} --iss {float(phi.iss[0])!r}")
+print(" ".join(f"--{f} " + " ".join(repr(float(v)) for v in getattr(phi, f)) for f in ("sr", "lr", "iss")))
 PY
-)
+}
+
+step_peer() {  # peer agreement: the CartPole Φ* trained 10 × 300k by SB3 + ReservoirPy and by ermrl, then paired
+  local phi d=docs/data/partial-observability-paper/peer
+  phi=$(phi_flags docs/data/partial-observability-paper/studies.log partial-observability-paper-cartpole-1res)
   mkdir -p "$d"
   for bias in bernoulli none; do  # 10 seeds in two parts (0-3, then 4-9); each part is skipped once it exists
     # shellcheck disable=SC2086
@@ -190,9 +212,9 @@ step_seed_schedule() {  # C2's likely cause, the evolution's fixed seeds: CartPo
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper lunarlander probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule)
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule)
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper lunarlander probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"
