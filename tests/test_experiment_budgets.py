@@ -6,6 +6,7 @@ import json
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import optuna
@@ -266,3 +267,22 @@ def test_budgets_override_every_test_phase_and_the_estimate_but_no_study(scale, 
     expected = sum(3 * 10 * 3_000_000 - (len(t.ermrl_lrs) + 2) * t.seeds * t.timesteps
                    for p in jax_only(plain) for t in p.tests) / runner.JAX_RATE
     assert extra == pytest.approx(expected)
+
+
+def test_the_scores_so_far_of_a_stopped_test_phase(evolved, interrupted, tmp_path):
+    """benchmarks/partial_test_summary.py reads the kept ER-MRL model (2 learning rates × 2 seeds) with the scores
+    that the uninterrupted test phase wrote; a folder that is not a partial one, or holds no model, is refused."""
+    script = [sys.executable, str(Path(__file__).resolve().parent.parent / "benchmarks" / "partial_test_summary.py")]
+    r = subprocess.run([*script, str(interrupted / STUDY / "test.partial")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    (line,) = [x for x in r.stdout.splitlines() if "(`ermrl`)" in x]
+    rows = json.loads((evolved / STUDY / "test" / "summary.json").read_text())
+    per_seed = rows[0]["per_seed"] + rows[1]["per_seed"]
+    assert line.startswith(f"| {rows[0]['model']}, {rows[1]['model']} (`ermrl`) | 4 of 4 | 1000, 1001, 1000, 1001 |")
+    assert line.endswith(" | " + ", ".join(f"{v:.1f}" for v in per_seed) + " |")
+    assert f"{np.mean(per_seed):.1f} ± {np.std(per_seed):.1f}" in line
+    (tmp_path / "empty.partial").mkdir()
+    for folder, message in ((tmp_path / "empty.partial", "holds no kept model yet (*.npz)"),
+                            (tmp_path / "missing.partial", "is not a folder; give an unfinished test phase's")):
+        r = subprocess.run([*script, str(folder)], capture_output=True, text=True)
+        assert r.returncode == 2 and message in r.stderr, r.stderr

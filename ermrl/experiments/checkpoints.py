@@ -94,6 +94,18 @@ def _concat(parts: list[np.ndarray], dtype) -> np.ndarray:
     return np.concatenate([np.asarray(p, dtype) for p in parts]) if parts else np.zeros(0, dtype)
 
 
+def read_job(path: Path) -> tuple[dict, Results]:
+    """(identity, results) of a file written by :func:`save_job`, e.g. to look at an unfinished test phase's
+    models. Raises ValueError for a file of another format or version, and whatever NumPy raises for a damaged
+    one."""
+    with np.load(path, allow_pickle=False) as data:
+        flat = {k: data[k] for k in data.files}
+    meta = json.loads(str(flat.pop("meta")))
+    if meta.get("format") != FORMAT or meta.get("version") != VERSION:
+        raise ValueError(f"{path} is not a kept test model of this ermrl ({FORMAT} v{VERSION})")
+    return meta["identity"], _results(meta, flat)
+
+
 def load_job(folder: Path, name: str, identity: dict) -> Results | None:
     """The results saved by :func:`save_job` as ``NAME`` for this ``identity``; None when there are none, they
     were saved for another identity, or the file cannot be read (the job is then trained again)."""
@@ -101,14 +113,10 @@ def load_job(folder: Path, name: str, identity: dict) -> Results | None:
     if not path.is_file():
         return None
     try:
-        with np.load(path, allow_pickle=False) as data:
-            flat = {k: data[k] for k in data.files}
-        meta = json.loads(str(flat.pop("meta")))
-        if meta.get("format") != FORMAT or meta.get("version") != VERSION or meta["identity"] != _plain(identity):
-            return None
-        return _results(meta, flat)
+        kept, results = read_job(path)
     except Exception:  # zipfile.BadZipFile, EOFError, OSError, KeyError, ValueError, ConfigError: train it again
         return None
+    return results if kept == _plain(identity) else None
 
 
 def _results(meta: dict, flat: dict[str, np.ndarray]) -> Results:

@@ -1,0 +1,77 @@
+"""The scores so far of an unfinished test phase: the models (or groups of agents) it has kept in ``OUT.partial/``.
+
+A test phase on a host env runs for hours (LunarLander: 10 agents × 3M steps a model), and writes its summary
+only at the end. Until then each finished model, or group of agents with ``--agents-per-run``, waits in
+``OUT.partial/NAME.npz`` (:mod:`ermrl.experiments.checkpoints`). This prints one Markdown row per model, its kept
+groups joined: the agents kept out of the model's, their seeds, and the same final-score statistics as the test
+summary (mean ± std over seeds, population std; IQM with its 95% CI) and per-seed scores.
+
+Example:
+    .venv/bin/python benchmarks/partial_test_summary.py \\
+        runs/experiments/partial-observability-small/lunarlander-2res/test.partial
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+
+GROUP = re.compile(r"^(?P<job>.+)\.agents-(?P<lo>\d+)-(?P<hi>\d+)$")
+
+
+def kept_models(partial: Path) -> dict[str, tuple[dict, list]]:
+    """{job name: (identity of one of its files, [Results of each kept file, in agent order])}."""
+    from ermrl.experiments.checkpoints import read_job
+
+    if not partial.is_dir():
+        raise ValueError(f"{partial} is not a folder; give an unfinished test phase's OUT.partial folder")
+    models: dict[str, list] = {}
+    for path in sorted(partial.glob("*.npz")):
+        match = GROUP.match(path.stem)
+        job, lo = (match["job"], int(match["lo"])) if match else (path.stem, 0)
+        identity, results = read_job(path)
+        models.setdefault(job, []).append((lo, identity, results))
+    if not models:
+        raise ValueError(f"{partial} holds no kept model yet (*.npz)")
+    return {job: (parts[0][1], [r for _, _, r in sorted(parts, key=lambda p: p[0])]) for job, parts in models.items()}
+
+
+def table(partial: Path) -> str:
+    from ermrl.analysis.statistics import format_ci
+    from ermrl.experiments.evaluation import summarize
+    from ermrl.training.results import Results
+
+    from ermrl import storage
+    from ermrl.experiments.checkpoints import SETTINGS
+
+    models = kept_models(partial)
+    seeds_per_model = storage.read_json(partial / SETTINGS)["test"]["seeds"]  # one agent per seed and learning rate
+    lines = ["| model | agents kept | seeds | steps | final mean ± std | IQM [95% CI] | per seed |",
+             "|---|---|---|---|---|---|---|"]
+    for job, (identity, parts) in models.items():
+        results = parts[0] if len(parts) == 1 else Results.concat(parts)
+        row = summarize(", ".join(identity["labels"]), "", results)
+        mean = "—" if row["final_mean"] is None else f"{row['final_mean']:.1f} ± {row['final_std']:.1f}"
+        per_seed = ", ".join("—" if v is None else f"{v:.1f}" for v in row["per_seed"])
+        seeds = ", ".join(str(int(s)) for s in results.seeds)
+        lines.append(f"| {row['model']} (`{job}`) | {results.size} of {seeds_per_model * len(identity['labels'])} | "
+                     f"{seeds} | {results.total_timesteps:,} | {mean} | "
+                     f"{format_ci(row['final_iqm'], row['final_iqm_low'], row['final_iqm_high'])} | {per_seed} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("partial", type=Path, help="an unfinished test phase's OUT.partial folder")
+    args = parser.parse_args(argv)
+    try:
+        sys.stdout.write(table(args.partial))
+    except (OSError, ValueError) as e:
+        parser.error(str(e))  # exit code 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
