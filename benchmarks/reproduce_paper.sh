@@ -76,9 +76,10 @@ step_pendulum_paper() {  # H1: PendulumNoVel at the paper's scale (900 trials ×
   run partial-observability paper --only pendulum-1res
 }
 step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution, test 10 × 3M at lr 1e-4
-  # a model (10 agents × 3M host steps) takes longer than one sitting here: train and keep it 5 agents at a time
+  # a model (10 agents × 3M host steps) takes longer than one sitting here: train and keep it 5 agents at a time;
+  # 5 LunarLander envs step faster in the main process than over 2 worker pipes (docs/benchmarks.md), same results
   run partial-observability small --only lunarlander-2res --test-seeds 10 --test-timesteps 3000000 --test-lrs 1e-4 \
-      --test-agents-per-run 5
+      --test-agents-per-run 5 --env-workers 0
 }
 step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study's small evolution and selection
   # with one reservoir, its Φ* trained on the test seeds (1000-1009, 3M steps, lr 1e-4) in two parts of 5 seeds
