@@ -4,7 +4,9 @@ A test phase on a host env runs for hours (LunarLander: 10 agents × 3M steps a 
 only at the end. Until then each finished model, or group of agents with ``--agents-per-run``, waits in
 ``OUT.partial/NAME.npz`` (:mod:`ermrl.experiments.checkpoints`). This prints one Markdown row per model, its kept
 groups joined: the agents kept out of the model's, their seeds, and the same final-score statistics as the test
-summary (mean ± std over seeds, population std; IQM with its 95% CI) and per-seed scores.
+summary (mean ± std over seeds, population std; IQM with its 95% CI) and per-seed scores. The model in training,
+if any, gets a row from its snapshot (``OUT.partial/NAME.snapshot``, :mod:`ermrl.training.snapshots`): how far it
+is, and each agent's mean return over its last 10 episodes so far.
 
 Example:
     .venv/bin/python benchmarks/partial_test_summary.py \\
@@ -33,9 +35,34 @@ def kept_models(partial: Path) -> dict[str, tuple[dict, list]]:
         job, lo = (match["job"], int(match["lo"])) if match else (path.stem, 0)
         identity, results = read_job(path)
         models.setdefault(job, []).append((lo, identity, results))
-    if not models:
-        raise ValueError(f"{partial} holds no kept model yet (*.npz)")
     return {job: (parts[0][1], [r for _, _, r in sorted(parts, key=lambda p: p[0])]) for job, parts in models.items()}
+
+
+def in_training(partial: Path) -> list[str]:
+    """One Markdown row per model in training (``*.snapshot``): iterations done, fitness so far per agent."""
+    import numpy as np
+
+    from ermrl.training import snapshots
+
+    rows = []
+    for path in sorted(partial.glob("*.snapshot")):
+        identity, snap = snapshots.read_any(path)
+        train = identity["train"]
+        per_iteration = train["ppo"]["n_steps"] * train["ppo"]["n_envs"]
+        total = -(-train["total_timesteps"] // per_iteration)
+        n = len(identity["seeds"])
+        rets = np.stack([r for r, _ in snap.finished])  # (iterations, n, n_steps, n_envs), NaN where none ended
+        so_far = []
+        for a in range(n):
+            ended = rets[:, a].reshape(-1).astype(np.float64)
+            ended = ended[~np.isnan(ended)]
+            so_far.append(float(np.mean(ended[-10:])) if len(ended) else float("nan"))
+        fit = np.array(so_far)
+        mean = f"{np.nanmean(fit):.1f} ± {np.nanstd(fit):.1f}" if np.isfinite(fit).any() else "—"
+        rows.append(f"| `{path.stem}` (in training) | {n} | {', '.join(str(s) for s in identity['seeds'])} | "
+                    f"{snap.iteration * per_iteration:,} of {total * per_iteration:,} | {mean} (last 10 episodes "
+                    f"so far) | — | {', '.join(f'{v:.1f}' for v in fit)} |")
+    return rows
 
 
 def table(partial: Path) -> str:
@@ -47,7 +74,11 @@ def table(partial: Path) -> str:
     from ermrl.experiments.checkpoints import SETTINGS
 
     models = kept_models(partial)
-    seeds_per_model = storage.read_json(partial / SETTINGS)["test"]["seeds"]  # one agent per seed and learning rate
+    training = in_training(partial)
+    if not models and not training:
+        raise ValueError(f"{partial} holds no kept model or snapshot yet (*.npz, *.snapshot)")
+    if models:  # one agent per seed and learning rate
+        seeds_per_model = storage.read_json(partial / SETTINGS)["test"]["seeds"]
     lines = ["| model | agents kept | seeds | steps | final mean ± std | IQM [95% CI] | per seed |",
              "|---|---|---|---|---|---|---|"]
     for job, (identity, parts) in models.items():
@@ -59,7 +90,7 @@ def table(partial: Path) -> str:
         lines.append(f"| {row['model']} (`{job}`) | {results.size} of {seeds_per_model * len(identity['labels'])} | "
                      f"{seeds} | {results.total_timesteps:,} | {mean} | "
                      f"{format_ci(row['final_iqm'], row['final_iqm_low'], row['final_iqm_high'])} | {per_seed} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + training) + "\n"
 
 
 def main(argv=None) -> int:

@@ -14,6 +14,9 @@ CASES = [
     ("train --timesteps 1e5",
      "ermrl train: error: argument --timesteps: invalid int value: '1e5'; see `ermrl train --help`"),
     ("train --seeds 0", "ermrl train: error: --seeds must be >= 1, got 0"),
+    ("train --snapshot-every -1", "ermrl train: error: --snapshot-every must be >= 0 seconds, got -1.0"),
+    ("test --study s --env-workers x",
+     "ermrl test: error: argument --env-workers: must be 'auto' or an integer >= 0, got 'x'; see `ermrl test --help`"),
     ("train --sr nan", "ermrl train: error: --sr must be positive and finite, got [nan]"),
     ("train --sr inf", "ermrl train: error: --sr must be positive and finite, got [inf]"),
     ("train --iss -1", "ermrl train: error: --iss must be positive and finite, got [-1.0]"),
@@ -70,7 +73,8 @@ CASES = [
     ("train --config evolvekey.toml",
      "ermrl train: error: config file evolvekey.toml: unknown option 'trials' for `ermrl train`; options here: "
      "backend, bias, env, env-workers, feed-action, first-seed, iss, lr, lstm-hidden, lstm-seq-len, model, no-reservoir, "
-     "observed-units, out, ppo-lr, preset, quiet, reservoirs, save-agents, seeds, skip-connection, sr, tensorboard, "
+     "observed-units, out, ppo-lr, preset, quiet, reservoirs, save-agents, seeds, skip-connection, snapshot-every, sr, "
+     "tensorboard, "
      "timesteps, units"),
     ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "
                                 "integer"),

@@ -16,6 +16,7 @@ from optuna.trial import TrialState
 from ermrl.cli import main
 from ermrl.evolution.study import load_study
 from ermrl.experiments import checkpoints, registry, runner
+from ermrl.experiments import evaluation
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -282,7 +283,45 @@ def test_the_scores_so_far_of_a_stopped_test_phase(evolved, interrupted, tmp_pat
     assert line.endswith(" | " + ", ".join(f"{v:.1f}" for v in per_seed) + " |")
     assert f"{np.mean(per_seed):.1f} ± {np.std(per_seed):.1f}" in line
     (tmp_path / "empty.partial").mkdir()
-    for folder, message in ((tmp_path / "empty.partial", "holds no kept model yet (*.npz)"),
+    for folder, message in ((tmp_path / "empty.partial", "holds no kept model or snapshot yet (*.npz, *.snapshot)"),
                             (tmp_path / "missing.partial", "is not a folder; give an unfinished test phase's")):
         r = subprocess.run([*script, str(folder)], capture_output=True, text=True)
         assert r.returncode == 2 and message in r.stderr, r.stderr
+
+
+def test_a_model_stopped_while_it_trains_resumes_from_its_snapshot(evolved, tmp_path, monkeypatch):
+    """Stopped in the middle of its first model (ER-MRL, after 1 of its 2 iterations), a test phase keeps that
+    model's snapshot in OUT.partial/; the rerun, with other env workers, continues it and writes the scores of a
+    run never stopped. The env workers asked for reach every model's training."""
+    trained_with = []
+    real_init = evaluation.Trainer.__init__
+
+    def init(self, config, *args, **kwargs):
+        trained_with.append(config.env_workers)
+        real_init(self, config, *args, **kwargs)
+
+    monkeypatch.setattr(evaluation.Trainer, "__init__", init)
+    study = load_study(runner.default_storage(evolved), f"{EXPERIMENT}-smoke-{STUDY}")
+    test = evaluation.TestConfig(seeds=2, timesteps=4096, ermrl_lrs=(3e-4,))
+    out = tmp_path / "test"
+
+    def stop_in_the_second_iteration(label):
+        def on_iteration(p):
+            if p.iteration == 2:
+                raise KeyboardInterrupt
+        return on_iteration
+
+    with pytest.raises(KeyboardInterrupt):
+        evaluation.run_test_phase(study, out, test, stop_in_the_second_iteration, save_agents=False,
+                                  snapshot_every_s=0, env_workers=1)
+    partial = checkpoints.partial_dir(out)
+    assert sorted(p.name for p in partial.iterdir()) == ["ermrl.snapshot", "settings.json"]
+    logs = []
+    rows = evaluation.run_test_phase(study, out, test, save_agents=False, log=logs.append, snapshot_every_s=0,
+                                     env_workers=0)
+    assert logs == [f"resumed from {partial}/ermrl.snapshot at iteration 1 of 2"]
+    assert not partial.exists()
+    assert trained_with == [1, 0, 0, 0]  # stopped in ER-MRL; then ER-MRL, PPO, PPO with full observation
+    unbroken = evaluation.run_test_phase(study, tmp_path / "unbroken", test, save_agents=False)
+    assert trained_with[4:] == ["auto"] * 3  # the evolution's setting
+    assert [r["per_seed"] for r in rows] == [r["per_seed"] for r in unbroken]

@@ -27,7 +27,12 @@ def add_parsers(sub, formatter) -> None:
                    help="the first seed: e.g. 1000 trains on seeds no evolution used (they use 0..S-1)")
     p.add_argument("--no-reservoir", action="store_true", help="plain PPO: the policy sees the observation")
     options.add_options(p, "env", "agent", "ppo", "model", "tensorboard", "agents")
-    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/train-ENV-TIME)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="run folder (default runs/train-ENV-TIME). With --out, the run's state is kept in "
+                        "OUT.snapshot while it trains, and the same command run again after a stop resumes from "
+                        "it, to the same results")
+    p.add_argument("--snapshot-every", type=float, default=300.0, metavar="SECONDS",
+                   help="with --out: seconds between snapshots (default 300)")
     common.config_and_quiet(p)
 
     p = sub.add_parser("evolve", help="evolve reservoir hyperparameters Φ with CMA-ES (the outer loop)",
@@ -67,6 +72,9 @@ def add_parsers(sub, formatter) -> None:
                                    "env outside the evolution (generalization).", formatter_class=formatter)
     common.study_location(p)
     options.add_options(p, "test", "tensorboard", "agents")
+    p.add_argument("--env-workers", type=options.workers, default=None, metavar="N|auto",
+                   help="host envs: processes that step them (0: the main process; default: the evolution's "
+                        "setting); results do not depend on it")
     common.config_and_quiet(p)
 
     p = sub.add_parser("report", help="write a self-contained HTML report of a study",
@@ -137,6 +145,8 @@ def cmd_train(args) -> int:
         raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
     if args.first_seed < 0:
         raise ConfigError(f"--first-seed must be >= 0, got {args.first_seed}")
+    if not args.snapshot_every >= 0:
+        raise ConfigError(f"--snapshot-every must be >= 0 seconds, got {args.snapshot_every}")
     if args.skip_connection and k == 0:
         raise ConfigError("--skip-connection feeds the observation beside a reservoir's context, but "
                           + ("--model lstm" if args.model == "lstm" else "--no-reservoir")
@@ -154,13 +164,18 @@ def cmd_train(args) -> int:
         "PPO" if k == 0 else f"ER-MRL ({k} reservoir{'s' if k > 1 else ''})"
     out = storage.check_folder(args.out or Path("runs") / f"train-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}")
 
+    # with --out, a stopped run resumes from OUT.snapshot when run again (written every few minutes)
+    snapshot = Path(f"{out}.snapshot") if args.out else None
     with TrainingBar(f"{args.env} × {args.seeds} seeds", enabled=not args.quiet) as bar:
-        results = Trainer(config).run(population, bar.update)
+        results = Trainer(config).run(population, bar.update, snapshot=snapshot, snapshot_every_s=args.snapshot_every,
+                                      log=print)
     with storage.staged_folder(out) as stage:  # all or nothing: summary.json, which marks it complete, last
         run = storage.write_train_run(stage, config, results, label, options.effective(args))
         if args.save_agents:
             agent_files.write_agents(run.folder / agent_files.AGENTS_DIR, config, results, label)
         learning_curves({label: results.curves()}, f"{results.env_id}: {label}", run.figure)
+    if snapshot is not None:
+        snapshot.unlink(missing_ok=True)
     if args.tensorboard is not None:
         tensorboard.write_results(args.tensorboard, results, label)
     fit = results.fitness()
@@ -308,7 +323,7 @@ def cmd_test(args) -> int:
     try:
         rows = run_test_phase(study, out, test, progress, save_agents=args.save_agents, log=print,
                               on_results=lambda label, results: models.append((label, results)),
-                              agents_per_run=args.agents_per_run)
+                              agents_per_run=args.agents_per_run, env_workers=args.env_workers)
     finally:
         close()
     if args.tensorboard is not None:

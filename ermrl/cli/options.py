@@ -66,7 +66,8 @@ class Option:
         parser.add_argument(self.flag, help=text, dest=self.dest, **kwargs)
 
 
-def _workers(value: str):
+def workers(value: str):
+    """argparse type of --env-workers: 'auto' or an integer >= 0."""
     if value == "auto":
         return value
     try:
@@ -95,7 +96,7 @@ def _groups() -> dict[str, list[Option]]:
     return {
         "env": [Option("--timesteps", TrainConfig, "total_timesteps", kwargs={"type": int}),
                 Option("--backend", TrainConfig, "backend", kwargs={"choices": ["auto", "jax", "host"]}),
-                Option("--env-workers", TrainConfig, "env_workers", kwargs={"type": _workers, "metavar": "N|auto"})],
+                Option("--env-workers", TrainConfig, "env_workers", kwargs={"type": workers, "metavar": "N|auto"})],
         "agent": [
             Option("--reservoirs", AgentConfig, "reservoirs", kwargs={"type": int}),
             Option("--units", ReservoirSpec, "units", kwargs={"type": int}),

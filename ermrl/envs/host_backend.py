@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from ermrl.envs.host_groups import EnvGroup, WorkerGroup, make_gymnasium
+from ermrl.envs.host_groups import EnvGroup, EpisodeRecord, WorkerGroup, make_gymnasium
 from ermrl.envs.masking import kept_dims
 from ermrl.envs.spaces import ActionSpace, EnvInfo
 from ermrl.errors import ConfigError
@@ -152,6 +152,16 @@ class HostEnv:
     def reset(self, seeds: np.ndarray) -> np.ndarray:
         """Seeds and resets every slot; seeds (n_slots,) -> masked obs (n_slots, obs_dim) float32."""
         return np.concatenate(self._call("reset", np.asarray(seeds)))
+
+    def snapshot(self) -> list[EpisodeRecord]:
+        """Every slot's :class:`~ermrl.envs.host_groups.EpisodeRecord`, in slot order."""
+        return [record for part in self._call("snapshot") for record in part]
+
+    def restore(self, records: list[EpisodeRecord]) -> np.ndarray:
+        """Rebuilds every slot from its record (the envs must be open, with as many slots); returns the masked
+        observations (n_slots, obs_dim). Raises :class:`~ermrl.envs.host_groups.ReplayMismatch` when one does
+        not replay exactly."""
+        return np.concatenate(self._call("restore", records))
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Steps every slot with actions (n_slots,) int or (n_slots, dim) float, auto-resetting ended episodes.

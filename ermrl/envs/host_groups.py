@@ -6,6 +6,12 @@ Gymnasium's same-step autoreset semantics: when an episode ends, ``step`` return
 
 Gymnasium's ``AsyncVectorEnv`` runs one process per env, which costs more than a MuJoCo step on a 2-core
 machine with dozens of agents; here each worker process holds a whole group of envs instead.
+
+A group also keeps, per env, how its running episode began (the reset's seed, or the state of the env's
+``np_random`` before an automatic reset) and the actions taken since. ``snapshot`` returns that record, and
+``restore`` rebuilds the same envs elsewhere (a later process) by resetting them the same way and replaying the
+actions. It works for any env whose dynamics depend only on its ``np_random`` and its actions (Box2D, MuJoCo,
+classic control), and it checks itself: the replayed observation must equal the recorded one, bit for bit.
 """
 
 from __future__ import annotations
@@ -70,6 +76,22 @@ def _quiet_mujoco():
         mujoco.set_mju_user_warning(warn)
 
 
+class EpisodeRecord(NamedTuple):
+    """How one env reached its current state: enough to rebuild it in another process."""
+
+    start: dict
+    """{"seed": int} for a seeded reset, {"rng": the bit generator's state} for an automatic one (JSON-ready)."""
+    actions: np.ndarray
+    """(t,) int64 or (t, dim) float64: the actions taken since that reset."""
+    obs: np.ndarray
+    """(raw_obs_dim,) float64: the env's current, unmasked observation, to check the replay against."""
+
+
+class ReplayMismatch(RuntimeError):
+    """A replayed env did not come back to its recorded observation: its dynamics depend on more than its seed
+    and actions, so the run cannot be resumed exactly."""
+
+
 class EnvGroup:
     """The envs of slots [first, first + size), all of one base id."""
 
@@ -78,13 +100,24 @@ class EnvGroup:
         self.kept = np.asarray(kept_dims)
         self.discrete = discrete
         self.envs = [make_gymnasium(base_id) for _ in range(size)]
+        self._starts: list[dict] = [{} for _ in range(size)]
+        self._actions: list[list] = [[] for _ in range(size)]
+        self._obs: list = [None] * size
 
     def _mask(self, obs) -> np.ndarray:
         return np.asarray(obs, np.float32)[self.kept]
 
+    def _began(self, i: int, start: dict, obs) -> None:
+        self._starts[i], self._actions[i], self._obs[i] = start, [], obs
+
     def reset(self, seeds: np.ndarray) -> np.ndarray:
         """Seeds and resets every env of the group: seeds (size,) -> (size, obs_dim) masked observations."""
-        return np.stack([self._mask(env.reset(seed=int(seed))[0]) for env, seed in zip(self.envs, seeds)])
+        out = []
+        for i, (env, seed) in enumerate(zip(self.envs, seeds)):
+            obs = env.reset(seed=int(seed))[0]
+            self._began(i, {"seed": int(seed)}, obs)
+            out.append(self._mask(obs))
+        return np.stack(out)
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Steps every env: actions (size,) int or (size, dim) float. Returns the packed (size, 2·obs_dim + 3)
@@ -95,13 +128,53 @@ class EnvGroup:
         if not self.discrete:
             actions = np.nan_to_num(actions, nan=0.0, posinf=0.0, neginf=0.0)
         for i, env in enumerate(self.envs):
-            o, r, term, trunc, _ = env.step(int(actions[i]) if self.discrete else actions[i])
+            action = int(actions[i]) if self.discrete else actions[i]
+            o, r, term, trunc, _ = env.step(action)
             out[i, d:2 * d] = np.asarray(o)[self.kept]
             out[i, 2 * d:] = r, term, trunc and not term
             if term or trunc:
+                start = {"rng": env.unwrapped.np_random.bit_generator.state}
                 o, _ = env.reset()
+                self._began(i, start, o)
+            else:
+                self._actions[i].append(action if self.discrete else np.array(action))
+                self._obs[i] = o
             out[i, :d] = np.asarray(o)[self.kept]
         return out
+
+    def snapshot(self) -> list[EpisodeRecord]:
+        """One :class:`EpisodeRecord` per env of the group, in slot order."""
+        if self.discrete:
+            as_actions = lambda a: np.asarray(a, np.int64).reshape(len(a))
+        else:
+            shape = self.envs[0].action_space.shape
+            as_actions = lambda a: np.asarray(a, np.float64).reshape((len(a),) + shape)
+        return [EpisodeRecord(start, as_actions(actions), np.asarray(obs, np.float64))
+                for start, actions, obs in zip(self._starts, self._actions, self._obs)]
+
+    def restore(self, records: list[EpisodeRecord]) -> np.ndarray:
+        """Brings every env to the state a :meth:`snapshot` recorded (in any process), by resetting it as its
+        episode began and replaying the actions. Returns the (size, obs_dim) masked observations. Raises
+        :class:`ReplayMismatch` when an env does not come back to the recorded observation."""
+        out = []
+        for i, (env, record) in enumerate(zip(self.envs, records)):
+            if "seed" in record.start:
+                obs = env.reset(seed=record.start["seed"])[0]
+            else:
+                env.unwrapped.np_random.bit_generator.state = record.start["rng"]
+                obs = env.reset()[0]
+            self._began(i, record.start, obs)
+            for action in record.actions:
+                action = int(action) if self.discrete else np.asarray(action, np.float32)
+                obs, _, term, trunc, _ = env.step(action)
+                if term or trunc:
+                    raise ReplayMismatch(f"slot {self.first + i}: the replayed episode ended early")
+                self._actions[i].append(action)
+            self._obs[i] = obs
+            if not np.array_equal(np.asarray(obs, np.float64), record.obs):
+                raise ReplayMismatch(f"slot {self.first + i}: the replayed observation differs from the recorded one")
+            out.append(self._mask(obs))
+        return np.stack(out)
 
     def close(self):
         for env in self.envs:
@@ -157,7 +230,7 @@ class WorkerGroup:
             code = self.process.wait(timeout=5)
             raise RuntimeError(f"an env worker process died (exit code {code}); see its error above") from None
         if status == "error":
-            raise RuntimeError(f"env worker: {value}")
+            raise (ReplayMismatch if value.startswith(ReplayMismatch.__name__) else RuntimeError)(f"env worker: {value}")
         return value
 
     def close(self):

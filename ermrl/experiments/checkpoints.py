@@ -8,6 +8,10 @@ TestConfig and Φ*'s trial), the job's name and labels, its TrainConfig and its 
 Φ). A rerun loads a job whose identity is the same instead of training it again. The folder's ``settings.json``
 holds the settings it was made for; a folder made for other settings is emptied first, so models trained for
 other settings are never mixed in. When the test phase is written, the folder is removed.
+
+A model still training has its latest snapshot there too, ``OUT.partial/JOB.snapshot``
+(:mod:`ermrl.training.snapshots`, every few minutes), so that a stop in the middle of a model loses minutes, not
+the model; it goes once the model is kept.
 """
 
 from __future__ import annotations
@@ -31,6 +35,11 @@ def partial_dir(out: Path) -> Path:
     """Where the finished models of the test phase ``out`` wait: ``out.parent / (out.name + ".partial")``."""
     out = Path(out)
     return out.parent / f"{out.name}.partial"
+
+
+def snapshot_path(folder: Path, name: str) -> Path:
+    """Where the job ``name`` keeps its training snapshot while it trains."""
+    return Path(folder) / f"{name}.snapshot"
 
 
 def _plain(obj):

@@ -120,7 +120,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
                    progress: Callable[[str], Callable] | None = None, save_agents: bool = True,
                    log: Callable[[str], None] | None = None,
                    on_results: Callable[[str, object], None] | None = None,
-                   agents_per_run: int | None = None) -> list[dict]:
+                   agents_per_run: int | None = None, snapshot_every_s: float = 300.0,
+                   env_workers: int | str | None = None) -> list[dict]:
     """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
     into ``out`` (checked before any training, written all at once at the end: :func:`ermrl.storage.staged_folder`),
     and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
@@ -139,6 +140,12 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     XLA batches the arithmetic differently for other population sizes. None: every agent of a model at once,
     the fastest.
 
+    While a model (or group) trains, its state is kept in ``out.partial/JOB.snapshot`` every ``snapshot_every_s``
+    seconds (:mod:`ermrl.training.snapshots`): a rerun after a stop continues it from there, to the same results,
+    telling ``log`` "resumed from ...".
+
+    ``env_workers`` (host envs: 0, N or 'auto') overrides the evolution's setting; results do not depend on it.
+
     ``on_results(label, results)`` is called with each model's :class:`~ermrl.training.results.Results` (its
     ``test.seeds`` agents), e.g. to write TensorBoard logs of its learning curves and PPO diagnostics."""
     config = storage.decode_study_record(study.user_attrs[ATTR])
@@ -147,6 +154,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     envs.describe(env_id, config.train.backend)  # an unknown id fails before any training
     storage.check_folder(out)
     base = dataclasses.replace(config.train_for(env_id), total_timesteps=test.timesteps)
+    if env_workers is not None:
+        base = dataclasses.replace(base, env_workers=env_workers)
     k = config.space.reservoirs
     seeds = list(range(FIRST_TEST_SEED, FIRST_TEST_SEED + test.seeds))
     ermrl_lrs = test.ermrl_lrs or (config.train.ppo.learning_rate,)
@@ -182,7 +191,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
         name = folders[model_labels[0]] if len(model_labels) == 1 else "ermrl"
         shown = model_labels[0] if len(model_labels) == 1 else kind
         results = _trained(partial, name, model_labels, train_config, population, agents_per_run, shown,
-                           progress, log)
+                           progress, log, snapshot_every_s)
         for m, label in enumerate(model_labels):
             part = results.select(np.arange(m * len(seeds), (m + 1) * len(seeds)))
             curves[label] = part.curves()
@@ -215,7 +224,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
 
 
 def _trained(partial: Path, name: str, labels: list[str], train_config, population: Population,
-             agents_per_run: int | None, shown: str, progress, log) -> Results:
+             agents_per_run: int | None, shown: str, progress, log, snapshot_every_s: float) -> Results:
     """The results of one model (a job): kept from ``partial`` when an earlier run finished it, whole or in
     groups of agents, else trained (in groups of ``agents_per_run``) and kept there group by group."""
     whole = checkpoints.load_job(partial, name, _job_identity(name, labels, train_config, population))
@@ -240,8 +249,11 @@ def _trained(partial: Path, name: str, labels: list[str], train_config, populati
                 log(f"kept {shown}{group} from an earlier run ({partial / part_name}.npz)")
         else:
             trainer = trainer or Trainer(train_config)  # one compile serves every group of this size
-            results = trainer.run(part, progress(shown + group) if progress else None)
+            snapshot = checkpoints.snapshot_path(partial, part_name)
+            results = trainer.run(part, progress(shown + group) if progress else None, snapshot=snapshot,
+                                  snapshot_every_s=snapshot_every_s, log=log)
             checkpoints.save_job(partial, part_name, identity, results)
+            snapshot.unlink(missing_ok=True)
         parts.append(results)
     return parts[0] if len(parts) == 1 else Results.concat(parts)
 

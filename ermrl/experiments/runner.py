@@ -200,7 +200,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
             lrs = ", ".join(f"{lr:g}" for lr in t.ermrl_lrs)
             log(f"{where}: {t.seeds} seeds × {t.timesteps:,} steps, ER-MRL at lr {lrs}")
             rows = run_test_phase(study, out, t, progress, log=lambda s, where=where: log(f"{where}: {s}"),
-                                  agents_per_run=budget.agents_per_run)
+                                  agents_per_run=budget.agents_per_run, env_workers=env_workers)
             for r in rows:
                 log(f"    test on {r['env_id']}: {r['model']}: final {r['final_mean']:.1f} ± {r['final_std']:.1f}"
                     if r["final_mean"] is not None else f"    test on {r['env_id']}: {r['model']}: all seeds diverged")

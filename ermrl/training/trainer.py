@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from pathlib import Path
 from typing import Callable, NamedTuple
 
 import jax
@@ -27,6 +28,8 @@ from ermrl.ppo.losses import Batch, bootstrapped_gae
 from ermrl.ppo.networks import ActorCritic
 from ermrl.training.results import WALL_S, Policies, Results
 from ermrl.envs import HostEnv, JaxEnv
+from ermrl.envs.host_groups import ReplayMismatch
+from ermrl.training import snapshots
 from ermrl.training.rollout import EnvCarry, Step, collect, start, start_from_obs
 
 
@@ -213,6 +216,7 @@ class Trainer:
         self._learn = jax.jit(shard(self.fns.learn), donate_argnums=0)
         self.n_iterations = config.ppo.iterations(config.total_timesteps)
         self._compiled: dict[int, Callable] = {}
+        self._compile_s = 0.0
 
     def _padded_size(self, n: int) -> int:
         d = len(self.devices)
@@ -256,45 +260,103 @@ class Trainer:
         """One rollout + PPO update for every agent (donates ``state``)."""
         return self.compiled(state)(state)
 
-    def _loop(self, compiled, state: AgentState, n: int, compile_s: float, progress_fn):
+    def _loop(self, compiled, state: AgentState, n: int, progress_fn, resumed: snapshots.Snapshot | None,
+              saver: Callable | None):
         """The host loop over iterations: gathers finished episodes and metrics of the first n agents; returns
-        them with the final state."""
+        them with the final state and the train time. ``resumed`` continues a stopped run; ``saver(snapshot)``
+        is called after every iteration (it writes one when its interval is up)."""
         steps_per_iter = self.config.ppo.buffer_size
-        finished: list[tuple[np.ndarray, np.ndarray]] = []
-        metrics, finite = [], np.ones(n, bool)
+        if resumed is None:
+            first, finished, metrics, finite, before = 0, [], [], np.ones(n, bool), 0.0
+        else:
+            first, before = resumed.iteration, resumed.train_s
+            finished, metrics, finite = list(resumed.finished), list(resumed.metrics), resumed.finite.copy()
+        compile_s = self._compile_s
         t1 = time.perf_counter()
-        for it in range(self.n_iterations):
+        for it in range(first, self.n_iterations):
             state, log = compiled(state)
             ret, length = np.asarray(log.finished_return)[:n], np.asarray(log.finished_length)[:n]
             finished.append((ret, length))
             finite &= np.asarray(log.finite)[:n]
-            elapsed = time.perf_counter() - t1  # after the transfers above: this update is done
+            elapsed = before + time.perf_counter() - t1  # after the transfers above: this update is done
             metrics.append({**{k: np.asarray(v)[:n] for k, v in log.metrics.items()}, WALL_S: np.full(n, elapsed)})
             if progress_fn is not None:
                 progress_fn(Progress(it + 1, self.n_iterations, (it + 1) * steps_per_iter * n,
                                      self.n_iterations * steps_per_iter * n, elapsed, compile_s))
-        return finished, metrics, finite, state
+            if saver is not None and it + 1 < self.n_iterations:
+                saver(lambda: snapshots.Snapshot(
+                    it + 1, jax.device_get(jax.tree.leaves(state)), self.env.snapshot() if self.host else None,
+                    finished, metrics, finite, compile_s, before + time.perf_counter() - t1))
+        return finished, metrics, finite, state, before + time.perf_counter() - t1
 
-    def run(self, population: Population, progress_fn: Callable[[Progress], None] | None = None) -> Results:
+    def _resume(self, state: AgentState, snap: snapshots.Snapshot) -> AgentState | None:
+        """``state`` (just initialized, envs open) brought to ``snap``; None when the snapshot does not fit it
+        or its envs do not replay exactly (the run then starts over)."""
+        fresh = jax.tree.leaves(state)
+        if len(fresh) != len(snap.leaves) or any(a.shape != b.shape or a.dtype != b.dtype
+                                                 for a, b in zip(fresh, snap.leaves)):
+            return None
+        if self.host:
+            try:
+                self.env.restore(snap.envs)
+            except ReplayMismatch:
+                return None
+        leaves = [jax.device_put(x, like.sharding) for x, like in zip(snap.leaves, fresh)]
+        return jax.tree.unflatten(jax.tree.structure(state), leaves)
+
+    def run(self, population: Population, progress_fn: Callable[[Progress], None] | None = None,
+            snapshot: Path | None = None, snapshot_every_s: float = 300.0,
+            log: Callable[[str], None] | None = None) -> Results:
         """Trains every agent of ``population`` for ``total_timesteps``; returns curves, fitness and every
-        agent's final policy (``Results.policies``)."""
+        agent's final policy (``Results.policies``).
+
+        With ``snapshot`` (a file path), the run's state is written there every ``snapshot_every_s`` seconds,
+        and a run that finds a snapshot of the same config and population there continues from it, to the same
+        Results as an unbroken run (:mod:`ermrl.training.snapshots`). The caller removes the file once it has
+        kept the Results. ``log`` gets a line when a run resumes or cannot."""
         ppo = self.config.ppo
         n = population.size
         t0 = time.perf_counter()
+        ident = None if snapshot is None else snapshots.identity(self.config, population, len(self.devices))
         try:
             state = self.init(population)
+            resumed = None if snapshot is None else snapshots.read(snapshot, ident)
+            if resumed is not None:
+                restored = self._resume(state, resumed)
+                if restored is None:
+                    state = self.init(population)  # the failed replay moved the envs: reset them again
+                    if log:
+                        log(f"{snapshot} does not replay exactly on this machine; training from the start")
+                    resumed = None
+                else:
+                    state = restored
+                    if log:
+                        log(f"resumed from {snapshot} at iteration {resumed.iteration} of {self.n_iterations}")
             compiled = self.compiled(state)
-            compile_s = time.perf_counter() - t0
-            finished, metrics, finite, state = self._loop(compiled, state, n, compile_s, progress_fn)
+            self._compile_s = time.perf_counter() - t0 if resumed is None else resumed.compile_s
+            saver = None if snapshot is None else _Saver(Path(snapshot), ident, snapshot_every_s)
+            finished, metrics, finite, state, train_s = self._loop(compiled, state, n, progress_fn, resumed, saver)
             # the final policies, in one transfer after the loop (the first n agents; padding dropped)
             policies = Policies.from_params(self.env.info, jax.device_get(state.learner.params), n)
         finally:
             self.close()
-        train_s = time.perf_counter() - t0 - compile_s
         return Results.from_iterations(
             config=self.config, population=population, finished=finished, metrics=metrics, finite=finite,
-            n_envs=ppo.n_envs, compile_s=compile_s, train_s=train_s, policies=policies,
+            n_envs=ppo.n_envs, compile_s=self._compile_s, train_s=train_s, policies=policies,
         )
+
+
+class _Saver:
+    """Writes a snapshot when ``every_s`` seconds have passed since the last (or since the start)."""
+
+    def __init__(self, path: Path, ident: dict, every_s: float):
+        self.path, self.ident, self.every_s = path, ident, every_s
+        self.last = time.perf_counter()
+
+    def __call__(self, make: Callable[[], snapshots.Snapshot]) -> None:
+        if time.perf_counter() - self.last >= self.every_s:
+            snapshots.write(self.path, self.ident, make())
+            self.last = time.perf_counter()
 
 
 def train(config: TrainConfig, population: Population, progress_fn=None) -> Results:
