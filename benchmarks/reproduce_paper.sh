@@ -83,18 +83,17 @@ step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution,
       --env-workers 0
 }
 step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study's small evolution and selection
-  # with one reservoir, its Φ* trained on the test seeds (1000-1009, 3M steps, lr 1e-4) in two parts of 5 seeds
-  # (≈ 1 h each here), ER-MRL only (the PPO baselines are the 2-reservoir test phase's), then compared
-  local d=docs/data/c3-lunarlander r=runs/c3-lunarlander phi first
+  # with one reservoir, its Φ* trained on the test seeds (1000-1009, 3M steps, lr 1e-4; ≈ 2 h here, resumes from
+  # docs/data/c3-lunarlander/ermrl-1res.snapshot), ER-MRL only (the PPO baselines are the 2-reservoir test
+  # phase's), then compared
+  local d=docs/data/c3-lunarlander r=runs/c3-lunarlander phi
   "$E" evolve --env LunarLanderNoVel-v3 --reservoirs 1 --fixed-iss 1.0 --trials 18 --seeds 2 --timesteps 50000 \
-      --study lunarlander-1res --storage "$d/studies.log" --out "$r" --quiet
+      --env-workers 0 --study lunarlander-1res --storage "$d/studies.log" --out "$r" --quiet
   "$E" select --study lunarlander-1res --storage "$d/studies.log" --out "$r" --top 3 --seeds 3 --quiet
   phi=$(phi_flags "$d/studies.log" lunarlander-1res)
-  for first in 1000 1005; do
-    # shellcheck disable=SC2086
-    [ -f "$d/ermrl-1res-$first/summary.json" ] || "$E" train --env LunarLanderNoVel-v3 $phi --seeds 5 \
-        --first-seed "$first" --timesteps 3000000 --ppo-lr 1e-4 --no-save-agents --quiet --out "$d/ermrl-1res-$first"
-  done
+  # shellcheck disable=SC2086
+  [ -f "$d/ermrl-1res/summary.json" ] || "$E" train --env LunarLanderNoVel-v3 $phi --seeds 10 --first-seed 1000 \
+      --timesteps 3000000 --ppo-lr 1e-4 --env-workers 0 --no-save-agents --quiet --out "$d/ermrl-1res"
   local two=docs/data/partial-observability-small/lunarlander-2res/test/summary.json
   [ -f "$two" ] || { echo "C3: the 2-reservoir test phase is not done yet (step lunarlander)"; return 0; }
   .venv/bin/python benchmarks/reservoir_count_summary.py "$two" "$d" | tee "$d/summary.md"

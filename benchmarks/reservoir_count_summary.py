@@ -4,8 +4,9 @@ Reads what ``benchmarks/reproduce_paper.sh lunarlander lunarlander_1res`` writes
 
 - the 2-reservoir Φ*'s agents: the ER-MRL row of the test phase's ``summary.json``
   (``docs/data/partial-observability-small/lunarlander-2res/test/``);
-- the 1-reservoir Φ*'s agents: the ``summary.json`` of each ``ermrl train`` part (``docs/data/c3-lunarlander/
-  ermrl-1res-*``), the same seeds (1000-1009), budget (3M steps) and PPO learning rate (1e-4).
+- the 1-reservoir Φ*'s agents: the ``summary.json`` of each ``ermrl train`` run under the folder
+  (``docs/data/c3-lunarlander/ermrl-1res``), the same seeds (1000-1009), budget (3M steps) and PPO learning
+  rate (1e-4).
 
 Prints a Markdown table: each model's n, mean ± std (population std) and IQM [95% CI]
 (``ermrl.analysis.statistics.summarize``), then P(2 reservoirs > 1) with its 95% CI (rliable) and the paired

@@ -216,7 +216,6 @@ class Trainer:
         self._learn = jax.jit(shard(self.fns.learn), donate_argnums=0)
         self.n_iterations = config.ppo.iterations(config.total_timesteps)
         self._compiled: dict[int, Callable] = {}
-        self._compile_s = 0.0
 
     def _padded_size(self, n: int) -> int:
         d = len(self.devices)
@@ -260,8 +259,8 @@ class Trainer:
         """One rollout + PPO update for every agent (donates ``state``)."""
         return self.compiled(state)(state)
 
-    def _loop(self, compiled, state: AgentState, n: int, progress_fn, resumed: snapshots.Snapshot | None,
-              saver: Callable | None):
+    def _loop(self, compiled, state: AgentState, n: int, compile_s: float, progress_fn,
+              resumed: snapshots.Snapshot | None, saver: Callable | None):
         """The host loop over iterations: gathers finished episodes and metrics of the first n agents; returns
         them with the final state and the train time. ``resumed`` continues a stopped run; ``saver(snapshot)``
         is called after every iteration (it writes one when its interval is up)."""
@@ -271,7 +270,6 @@ class Trainer:
         else:
             first, before = resumed.iteration, resumed.train_s
             finished, metrics, finite = list(resumed.finished), list(resumed.metrics), resumed.finite.copy()
-        compile_s = self._compile_s
         t1 = time.perf_counter()
         for it in range(first, self.n_iterations):
             state, log = compiled(state)
@@ -333,16 +331,17 @@ class Trainer:
                     if log:
                         log(f"resumed from {snapshot} at iteration {resumed.iteration} of {self.n_iterations}")
             compiled = self.compiled(state)
-            self._compile_s = time.perf_counter() - t0 if resumed is None else resumed.compile_s
+            compile_s = time.perf_counter() - t0 if resumed is None else resumed.compile_s
             saver = None if snapshot is None else _Saver(Path(snapshot), ident, snapshot_every_s)
-            finished, metrics, finite, state, train_s = self._loop(compiled, state, n, progress_fn, resumed, saver)
+            finished, metrics, finite, state, train_s = self._loop(compiled, state, n, compile_s, progress_fn,
+                                                                        resumed, saver)
             # the final policies, in one transfer after the loop (the first n agents; padding dropped)
             policies = Policies.from_params(self.env.info, jax.device_get(state.learner.params), n)
         finally:
             self.close()
         return Results.from_iterations(
             config=self.config, population=population, finished=finished, metrics=metrics, finite=finite,
-            n_envs=ppo.n_envs, compile_s=self._compile_s, train_s=train_s, policies=policies,
+            n_envs=ppo.n_envs, compile_s=compile_s, train_s=train_s, policies=policies,
         )
 
 
