@@ -45,12 +45,16 @@ restore() {
   done < <(find "$src" \( -path '*/test/summary.json' -o -path '*/test-*/summary.json' \))  # test-ENV: on another env
 }
 
+# The PPO baselines, trained once and shared by the test phases that have the same (H2's Ant and H3's to-ant, …):
+# docs/data/baseline-models/ENV/MODEL-DIGEST.npz (a few MB each), kept in the repository like the journals.
+STORE=docs/data/baseline-models
+
 run() {  # run EXPERIMENT SCALE ARGS...: one experiment at one scale, its journal under docs/data/
   local name=$1 scale=$2; shift 2
   restore "$name-$scale"
   trap "stash '$name-$scale'" EXIT  # also when the run is stopped (Ctrl-C, a failure)
   "$E" experiment run "$name" --scale "$scale" --storage "docs/data/$name-$scale/studies.log" \
-      --out "runs/experiments/$name-$scale" "$@"
+      --out "runs/experiments/$name-$scale" --baseline-store "$STORE" "$@"
   collect "$name-$scale"
   stash "$name-$scale"
   trap - EXIT

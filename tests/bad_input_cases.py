@@ -163,6 +163,8 @@ CASES = [
     ("test --study s --trial -1", "ermrl test: error: --trial must be a trial number >= 0, got -1"),
     ("test --study s --auc-steps 0", "ermrl test: error: --auc-steps must be >= 1, got 0"),
     ("test --study s --agents-per-run 0", "ermrl test: error: --agents-per-run must be >= 1, got 0"),
+    ("test --study s --baseline-store afile", "ermrl test: error: --baseline-store afile is a file, not a folder; "
+                                              "give a folder path (it is created if missing)"),
     ("test --study s --env Nope-v1", "ermrl test: error: unknown env id 'Nope-v1': Gymnasium has no 'Nope-v1'; did "
                                      "you mean Hopper-v5, Hopper-v4, Hopper-v3?"),
     (f"test --study one --storage {SQLITE} --trial 7", "ermrl test: error: trial 7 of study 'one' is not a completed "
@@ -206,6 +208,9 @@ CASES = [
      "or delete it and rerun `ermrl baselines`"),
     ("experiment run partial-observability --out afile", "ermrl experiment: error: --out afile is a file, not a "
                                                          "folder; give a folder path (it is created if missing)"),
+    ("experiment run partial-observability --baseline-store afile/models",
+     "ermrl experiment: error: --baseline-store afile/models: its parent afile is a file, not a folder; give a "
+     "folder path (it is created if missing)"),
     # -- analyze --------------------------------------------------------------------------------------------
     ("analyze hp-map nope --out fig.png", "ermrl analyze: error: no study 'nope': runs/nope/study.db does not exist; "
                                           "run `ermrl evolve --study nope` first or pass --storage"),

@@ -311,6 +311,8 @@ def cmd_test(args) -> int:
     test = options.test_config(args)
     if args.agents_per_run is not None and args.agents_per_run < 1:
         raise ConfigError(f"--agents-per-run must be >= 1, got {args.agents_per_run}")
+    if args.baseline_store is not None:
+        storage.check_folder(args.baseline_store, "--baseline-store")
     if test.env_id is not None:
         from ermrl import envs
 
@@ -323,7 +325,8 @@ def cmd_test(args) -> int:
     try:
         rows = run_test_phase(study, out, test, progress, save_agents=args.save_agents, log=print,
                               on_results=lambda label, results: models.append((label, results)),
-                              agents_per_run=args.agents_per_run, env_workers=args.env_workers)
+                              agents_per_run=args.agents_per_run, env_workers=args.env_workers,
+                              baseline_store=args.baseline_store)
     finally:
         close()
     if args.tensorboard is not None:

@@ -30,6 +30,7 @@ def add_parser(sub, formatter) -> None:
     run.add_argument("--out", type=Path, default=None, help="folder (default runs/experiments/NAME-SCALE)")
     run.add_argument("--baselines", type=Path, default=None, metavar="TABLE",
                      help="baselines table for studies over several envs (default runs/baselines.json over the shipped one)")
+    run.add_argument("--baseline-store", type=Path, default=None, metavar="DIR", help=options.BASELINE_STORE_HELP)
     run.add_argument("--no-estimate", action="store_true", help="do not measure env step costs for the estimate")
     for flag, field, kwargs in (("--test-seeds", "seeds", {"type": int, "metavar": "N"}),
                                 ("--test-timesteps", "timesteps", {"type": int, "metavar": "N"}),
@@ -81,6 +82,8 @@ def _run(args) -> int:
         raise ConfigError(f"experiment {experiment.name} has no study {unknown[0]!r}; its studies: "
                           f"{', '.join(sorted(names))}{hint}")
     folder = storage.check_folder(args.out or runner.experiment_dir(experiment, scale))
+    if args.baseline_store is not None:
+        storage.check_folder(args.baseline_store, "--baseline-store")
     plans = [p for p in runner.plan(experiment, scale, folder, args.backend, args.env_workers, budget)
              if not args.only or p.spec.name in args.only]
     if any(p.config.normalized for p in plans):  # a damaged table fails now, not after the first studies
@@ -110,7 +113,7 @@ def _run(args) -> int:
     progress, close = bars(args.quiet)
     try:
         report = runner.run_experiment(experiment, scale, folder, url, args.backend, args.env_workers, tuple(args.only),
-                                       print, progress, args.baselines, budget)
+                                       print, progress, args.baselines, budget, args.baseline_store)
     finally:
         close()
     print(f"report: {report.resolve()}")

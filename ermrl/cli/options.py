@@ -20,6 +20,11 @@ from pathlib import Path
 from ermrl.errors import ConfigError
 
 
+BASELINE_STORE_HELP = ("keep the trained PPO baselines in DIR and reuse them: a test phase whose baseline (env, seeds, "
+                       "budget, PPO settings; any Φ*) is there loads it instead of training it again. Default: "
+                       "train every baseline.")
+
+
 @functools.cache
 def field_docs(cls) -> dict[str, str]:
     """{field name: the docstring under it} of a dataclass, read from its source."""
@@ -138,7 +143,8 @@ def _groups() -> dict[str, list[Option]]:
                         "learning rate), each kept in OUT.partial/ when it finishes, so that a stop loses one group "
                         "at most: for models longer than one sitting (LunarLander at 3M steps). Results are the "
                         "same up to rounding. Default: all agents of a model at once (the fastest).",
-                        kwargs={"type": int, "metavar": "N"})],
+                        kwargs={"type": int, "metavar": "N"}),
+                 Option("--baseline-store", help=BASELINE_STORE_HELP, kwargs={"type": Path, "metavar": "DIR"})],
         "agents": [Option("--save-agents", help="save every agent's final policy in the run folder's agents/ "
                                                 "(one .npz each, about 100 kB at the default sizes; "
                                                 "ermrl.load_agent loads one).",

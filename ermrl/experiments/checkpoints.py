@@ -42,7 +42,7 @@ def snapshot_path(folder: Path, name: str) -> Path:
     return Path(folder) / f"{name}.snapshot"
 
 
-def _plain(obj):
+def plain(obj):
     """``obj`` as it reads back from JSON (tuples become lists, NumPy values Python ones), to compare identities."""
     return json.loads(json.dumps(obj, default=storage._json_default))
 
@@ -55,7 +55,7 @@ def open_partial(out: Path, settings: dict) -> tuple[Path, bool]:
     discarded = False
     if folder.exists():
         try:
-            same = storage.read_json(path) == _plain(settings)
+            same = storage.read_json(path) == plain(settings)
         except (OSError, ValueError):  # missing or damaged: nothing in it can be trusted
             same = False
         if same:
@@ -73,7 +73,7 @@ def discard(out: Path) -> None:
 
 def save_job(folder: Path, name: str, identity: dict, results: Results) -> Path:
     """Writes ``results`` (A agents) to ``folder/NAME.npz`` atomically, with ``identity`` (JSON-ready)."""
-    meta = {"format": FORMAT, "version": VERSION, "identity": _plain(identity), "env_id": results.env_id,
+    meta = {"format": FORMAT, "version": VERSION, "identity": plain(identity), "env_id": results.env_id,
             "total_timesteps": int(results.total_timesteps),
             "timesteps_per_iteration": int(results.timesteps_per_iteration),
             "compile_s": float(results.compile_s), "train_s": float(results.train_s),
@@ -125,7 +125,7 @@ def load_job(folder: Path, name: str, identity: dict) -> Results | None:
         kept, results = read_job(path)
     except Exception:  # zipfile.BadZipFile, EOFError, OSError, KeyError, ValueError, ConfigError: train it again
         return None
-    return results if kept == _plain(identity) else None
+    return results if kept == plain(identity) else None
 
 
 def _results(meta: dict, flat: dict[str, np.ndarray]) -> Results:

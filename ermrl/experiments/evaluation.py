@@ -28,7 +28,7 @@ from ermrl.envs import masking
 from ermrl.errors import ConfigError
 from ermrl.evolution.selection import chosen_trial
 from ermrl.evolution.study import ATTR
-from ermrl.experiments import checkpoints
+from ermrl.experiments import baseline_models, checkpoints
 from ermrl.training import Population, Results, Trainer, recurrent
 
 FIRST_TEST_SEED = 1000
@@ -121,7 +121,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
                    log: Callable[[str], None] | None = None,
                    on_results: Callable[[str, object], None] | None = None,
                    agents_per_run: int | None = None, snapshot_every_s: float = 300.0,
-                   env_workers: int | str | None = None) -> list[dict]:
+                   env_workers: int | str | None = None, baseline_store: Path | None = None) -> list[dict]:
     """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
     into ``out`` (checked before any training, written all at once at the end: :func:`ermrl.storage.staged_folder`),
     and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
@@ -145,6 +145,11 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     telling ``log`` "resumed from ...".
 
     ``env_workers`` (host envs: 0, N or 'auto') overrides the evolution's setting; results do not depend on it.
+
+    ``baseline_store`` (a folder): the PPO baselines are looked up there before training, and kept there once
+    trained, so that another test phase with the same baseline (same env, seeds, budget and PPO settings, any Φ*)
+    loads it instead of training it again (:mod:`ermrl.experiments.baseline_models`), telling ``log`` "reused
+    MODEL from the baseline store (PATH)". None: every baseline is trained here.
 
     ``on_results(label, results)`` is called with each model's :class:`~ermrl.training.results.Results` (its
     ``test.seeds`` agents), e.g. to write TensorBoard logs of its learning curves and PPO diagnostics."""
@@ -183,6 +188,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
 
     if agents_per_run is not None and agents_per_run < 1:
         raise ConfigError(f"--agents-per-run must be >= 1, got {agents_per_run}")
+    if baseline_store is not None:
+        storage.check_folder(baseline_store, "--baseline-store")
     partial, discarded = checkpoints.open_partial(out, {"test": storage.to_dict(test), "phi_trial": trial.number})
     if discarded and log:
         log(f"discarded the models of an unfinished test phase with other settings ({partial})")
@@ -191,7 +198,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
         name = folders[model_labels[0]] if len(model_labels) == 1 else "ermrl"
         shown = model_labels[0] if len(model_labels) == 1 else kind
         results = _trained(partial, name, model_labels, train_config, population, agents_per_run, shown,
-                           progress, log, snapshot_every_s)
+                           progress, log, snapshot_every_s, baseline_store if kind != "ER-MRL" else None)
         for m, label in enumerate(model_labels):
             part = results.select(np.arange(m * len(seeds), (m + 1) * len(seeds)))
             curves[label] = part.curves()
@@ -224,16 +231,43 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
 
 
 def _trained(partial: Path, name: str, labels: list[str], train_config, population: Population,
-             agents_per_run: int | None, shown: str, progress, log, snapshot_every_s: float) -> Results:
+             agents_per_run: int | None, shown: str, progress, log, snapshot_every_s: float,
+             store: Path | None = None) -> Results:
     """The results of one model (a job): kept from ``partial`` when an earlier run finished it, whole or in
-    groups of agents, else trained (in groups of ``agents_per_run``) and kept there group by group."""
-    whole = checkpoints.load_job(partial, name, _job_identity(name, labels, train_config, population))
+    groups of agents, or from ``store`` (a baseline store, None for ER-MRL), else trained (in groups of
+    ``agents_per_run``) and kept in ``partial`` group by group, then whole in ``store``."""
+    n = population.size
+    size = n if agents_per_run is None else min(agents_per_run, n)
+    identity = _job_identity(name, labels, train_config, population)
+    whole = checkpoints.load_job(partial, name, identity)  # kept whole: trained as one group
     if whole is not None:
         if log:
             log(f"kept {', '.join(labels)} from an earlier run ({partial / name}.npz)")
-        return whole
+        size = n
+    elif store is not None:
+        whole, path = baseline_models.load(store, _shared_identity(identity, size, n))
+        if whole is not None:
+            if log:
+                log(f"reused {', '.join(labels)} from the baseline store ({path})")
+            return whole
+    if whole is None:
+        whole = _train(partial, name, labels, train_config, population, size, shown, progress, log,
+                       snapshot_every_s)
+    if store is not None:
+        baseline_models.save(store, _shared_identity(identity, size, n), whole)
+    return whole
+
+
+def _shared_identity(identity: dict, size: int, n: int) -> dict:
+    """A job's identity in a baseline store: with its group size, since groups of agents round differently."""
+    return {**identity, "agents_per_run": None if size == n else size}
+
+
+def _train(partial: Path, name: str, labels: list[str], train_config, population: Population, size: int,
+           shown: str, progress, log, snapshot_every_s: float) -> Results:
+    """Trains one model in groups of ``size`` agents, keeping each group in ``partial`` as it finishes (and
+    loading the groups an earlier run kept)."""
     n = population.size
-    size = n if agents_per_run is None else min(agents_per_run, n)
     trainer, parts = None, []
     for lo in range(0, n, size):
         hi = min(lo + size, n)

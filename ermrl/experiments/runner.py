@@ -153,11 +153,13 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
 def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_url: str | None = None,
                    backend: str = "auto", env_workers: int | str = "auto", only: tuple[str, ...] = (),
                    log: Callable[[str], None] = print, progress: Callable | None = None,
-                   baselines_table: Path | None = None, budget: TestBudget = TestBudget()) -> Path:
+                   baselines_table: Path | None = None, budget: TestBudget = TestBudget(),
+                   baseline_store: Path | None = None) -> Path:
     """Runs (or resumes) every study of ``experiment`` (or those named in ``only``); returns the report's path.
     Studies over several envs take their constants from ``baselines_table`` (default runs/baselines.json over
     the shipped table), computing the missing ones first. ``budget`` overrides the test phases' budgets; a test
-    phase stopped midway keeps its finished models for the rerun (:mod:`ermrl.experiments.checkpoints`)."""
+    phase stopped midway keeps its finished models for the rerun (:mod:`ermrl.experiments.checkpoints`), and with
+    ``baseline_store`` the PPO baselines are shared with other test phases (:mod:`ermrl.experiments.baseline_models`)."""
     import optuna
 
     from ermrl.analysis.experiment_report import write_experiment_report
@@ -200,7 +202,8 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
             lrs = ", ".join(f"{lr:g}" for lr in t.ermrl_lrs)
             log(f"{where}: {t.seeds} seeds × {t.timesteps:,} steps, ER-MRL at lr {lrs}")
             rows = run_test_phase(study, out, t, progress, log=lambda s, where=where: log(f"{where}: {s}"),
-                                  agents_per_run=budget.agents_per_run, env_workers=env_workers)
+                                  agents_per_run=budget.agents_per_run, env_workers=env_workers,
+                                  baseline_store=baseline_store)
             for r in rows:
                 log(f"    test on {r['env_id']}: {r['model']}: final {r['final_mean']:.1f} ± {r['final_std']:.1f}"
                     if r["final_mean"] is not None else f"    test on {r['env_id']}: {r['model']}: all seeds diverged")
