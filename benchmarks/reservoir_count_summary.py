@@ -3,7 +3,8 @@
 Reads what ``benchmarks/reproduce_paper.sh lunarlander lunarlander_1res`` writes:
 
 - the 2-reservoir Φ*'s agents: the ER-MRL row of the test phase's ``summary.json``
-  (``docs/data/partial-observability-small/lunarlander-2res/test/``);
+  (``docs/data/partial-observability-small/lunarlander-2res/test/``), or, while its PPO baselines still train,
+  the ER-MRL model it has kept (``.../test.partial/ermrl.npz``, :func:`ermrl.experiments.checkpoints.read_job`);
 - the 1-reservoir Φ*'s agents: the ``summary.json`` of each ``ermrl train`` run under the folder
   (``docs/data/c3-lunarlander/ermrl-1res``), the same seeds (1000-1009), budget (3M steps) and PPO learning
   rate (1e-4).
@@ -27,9 +28,17 @@ from pathlib import Path
 
 
 def two_reservoirs(test_summary: Path) -> dict[int, float]:
-    """{seed: final score} of the ER-MRL model of a test phase (its seeds are 1000, 1001, ...)."""
+    """{seed: final score} of the ER-MRL model of a test phase (its seeds are 1000, 1001, ...): from its
+    ``summary.json``, or from the model kept in its ``.partial/`` folder (an ``.npz``)."""
     from ermrl.experiments.evaluation import FIRST_TEST_SEED
 
+    if test_summary.suffix == ".npz":
+        from ermrl.experiments import checkpoints
+
+        identity, results = checkpoints.read_job(test_summary)
+        if identity.get("job") != "ermrl" or len(identity.get("labels", [])) != 1:
+            raise ValueError(f"{test_summary} is not the ER-MRL model of a test phase of one learning rate")
+        return {int(s): float(f) for s, f in zip(results.seeds, results.fitness()) if f == f}
     rows = [r for r in json.loads(test_summary.read_text()) if r["kind"] == "ER-MRL"]
     if len(rows) != 1:
         raise ValueError(f"{test_summary} has {len(rows)} ER-MRL rows; give a test phase of one learning rate")
@@ -63,7 +72,8 @@ def table(two: dict[int, float], one: dict[int, float]) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("test_summary", type=Path, help="the 2-reservoir test phase's summary.json")
+    parser.add_argument("test_summary", type=Path, help="the 2-reservoir test phase's summary.json, or the ER-MRL "
+                                                        "model its .partial/ folder keeps (ermrl.npz)")
     parser.add_argument("one_reservoir", type=Path, help="folder of the 1-reservoir `ermrl train` parts")
     args = parser.parse_args(argv)
     try:

@@ -5,7 +5,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from ermrl.analysis.statistics import format_ci, paired_difference, probability_of_improvement, summarize
+from ermrl.experiments import checkpoints
+from ermrl.training.results import Episodes, Results
 
 SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "reservoir_count_summary.py"
 TWO = [150.0, 200.0, 210.0, -30.0, 180.0, 220.0, 190.0, 100.0, 240.0, 230.0]
@@ -52,3 +56,28 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
     done = _run(test, tmp_path / "empty")
     assert done.returncode == 2
     assert "no */summary.json under" in done.stderr and "reproduce_paper.sh lunarlander_1res" in done.stderr
+
+
+def _kept_model(folder, job, labels, finals):
+    """A test phase's kept model as `ermrl test` writes it (checkpoints.save_job): each seed's last 10 episodes
+    return its final score, after 5 episodes that do not count."""
+    seeds = np.arange(1000, 1000 + len(finals))
+    episodes = [Episodes(np.arange(1, 16) * 1000, np.r_[np.full(5, -500.0), np.full(10, f)], np.full(15, 1000))
+                for f in finals]
+    results = Results(env_id="LunarLanderNoVel-v3", total_timesteps=15000, timesteps_per_iteration=1000, seeds=seeds,
+                      phi={}, learning_rate=np.full(len(finals), 1e-4), episodes=episodes,
+                      finite=np.ones(len(finals), bool), metrics={}, compile_s=0.0, train_s=0.0)
+    identity = {"job": job, "labels": labels, "seeds": seeds.tolist()}
+    return checkpoints.save_job(folder, job, identity, results)
+
+
+def test_the_two_reservoir_model_kept_by_an_unfinished_test_phase_gives_the_same_table(tmp_path):
+    test, folder = _write(tmp_path, [TWO])
+    kept = _kept_model(tmp_path / "test.partial", "ermrl", ["ER-MRL (trial 6)"], TWO)
+    from_summary, from_kept = _run(test, folder), _run(kept, folder)
+    assert from_kept.returncode == 0, from_kept.stderr
+    assert from_kept.stdout == from_summary.stdout
+    ppo = _kept_model(tmp_path / "test.partial", "ppo", ["PPO (same observation)"], ONE)
+    done = _run(ppo, folder)
+    assert done.returncode == 2
+    assert f"{ppo} is not the ER-MRL model of a test phase of one learning rate" in done.stderr
