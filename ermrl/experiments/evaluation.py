@@ -29,7 +29,7 @@ from ermrl.errors import ConfigError
 from ermrl.evolution.selection import chosen_trial
 from ermrl.evolution.study import ATTR
 from ermrl.experiments import baseline_models, checkpoints
-from ermrl.training import Population, Results, Trainer, recurrent
+from ermrl.training import Population, Results, Trainer, recurrent, snapshots
 
 FIRST_TEST_SEED = 1000
 """Test seeds start here, away from the evolution's seeds 0, 1, 2, ... and selection's (new reservoirs,
@@ -293,13 +293,12 @@ def _train(partial: Path, name: str, labels: list[str], train_config, population
 
 
 def _job_identity(name: str, labels: list[str], train_config, population: Population) -> dict:
-    """What a test job's results depend on (beyond the test phase's settings), JSON-ready: the env workers are
-    left out, since results do not depend on their number."""
-    train = storage.to_dict(train_config)
-    train.pop("env_workers", None)
-    return {"job": name, "labels": list(labels), "train": train, "seeds": population.seeds.tolist(),
-            "learning_rates": population.learning_rate.tolist(),
-            "phi": {f: np.asarray(v).tolist() for f, v in population.phi._asdict().items()}}
+    """What a test job's results depend on (beyond the test phase's settings), JSON-ready: its name and labels,
+    and what a training run's state depends on (:func:`ermrl.training.snapshots.identity`: the TrainConfig without
+    the env workers, seeds, learning rates, Φ) but the number of devices, which kept models predate."""
+    run = snapshots.identity(train_config, population, n_devices=1)
+    del run["devices"]
+    return {"job": name, "labels": list(labels), **run}
 
 
 def _add_improvement(rows: list[dict]) -> None:
