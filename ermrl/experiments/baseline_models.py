@@ -5,9 +5,9 @@ A test phase's PPO baselines (vanilla PPO on the same and on the full observatio
 models, to the last bit. The paper's experiments hold such pairs: the H2 test on Ant and the H3 test of the study
 evolved on HalfCheetah and Swimmer train the same PPO on Ant (10 seeds × 1M steps, ≈ 1.5 h of host steps here),
 as do the test phases of one env at several reservoir counts or sizes. A store keeps each trained baseline once,
-as ``STORE/ENV/DIGEST.npz`` in the format of :mod:`ermrl.experiments.checkpoints`, where DIGEST hashes the job's
-identity (its TrainConfig without the env workers, seeds, learning rates, labels and group size); a later test
-phase with the same identity loads it instead of training it. The identity is checked in full on loading, and a
+as ``STORE/ENV/JOB-DIGEST.npz`` in the format of :mod:`ermrl.experiments.checkpoints`, where DIGEST hashes the
+job's identity (its name and labels, its TrainConfig less the env workers, its seeds, learning rates and group
+size); a later test phase with the same identity loads it instead of training it. The identity is checked in full on loading, and a
 damaged file is ignored (the model is trained again and the file replaced).
 
 ER-MRL models never go into the store: they depend on Φ*, and reusing them would hide a changed selection.
