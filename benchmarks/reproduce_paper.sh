@@ -136,6 +136,27 @@ step_hpmap() {  # H3 / appendix: the top Φ of the locomotion studies on sr × l
   "$E" analyze hp-map locomotion-small-ant-2res locomotion-small-halfcheetah-2res locomotion-small-swimmer-2res \
       --storage docs/data/locomotion-small/studies.log --out docs/data/locomotion-small/hp_map.png
 }
+step_observed_units() {  # C15: CartPoleNoVel reading 100 of 100, 1000 of 1000 and 100 of 1000 units; small
+  # evolutions (iss fixed at 1.0), each Φ* tested 10 × 1M against PPO
+  run observed-units small "${TEST10[@]}"
+  local d=docs/data/observed-units-small
+  .venv/bin/python benchmarks/variant_summary.py "100 of 100=$d/100-of-100/test/summary.json" \
+      "1000 of 1000=$d/1000-of-1000/test/summary.json" "100 of 1000=$d/100-of-1000/test/summary.json" \
+      --compare "100 of 100" "1000 of 1000" --compare "100 of 1000" "1000 of 1000" \
+      --compare "100 of 1000" "100 of 100" | tee "$d/summary.md"
+}
+step_sizes() {  # C14: CartPoleNoVel and PendulumNoVel at 25 to 1000 units, small evolutions, each tested 10 × 1M
+  # (the two Humanoid studies of the experiment, ≈ 245 h at the paper's scale, are left out here)
+  run reservoir-sizes small --only cartpole-25u cartpole-50u cartpole-100u cartpole-200u cartpole-500u \
+      cartpole-1000u pendulum-25u pendulum-50u pendulum-100u pendulum-200u pendulum-500u pendulum-1000u "${TEST10[@]}"
+  local d=docs/data/reservoir-sizes-small env n args
+  for env in cartpole pendulum; do
+    args=()
+    for n in 25 50 100 200 500 1000; do args+=("$n units=$d/$env-${n}u/test/summary.json"); done
+    for n in 25 50 200 500 1000; do args+=(--compare "$n units" "100 units"); done
+    .venv/bin/python benchmarks/variant_summary.py "${args[@]}" | tee "$d/$env.md"
+  done
+}
 step_probe() {  # H1, C4: velocity R² of each H1 study's Φ*, against the default Φ and a memoryless one (1 reservoir)
   local spec env data study name
   for spec in CartPoleNoVel-v1:partial-observability-paper:cartpole-1res:cartpole \
@@ -220,9 +241,9 @@ step_seed_schedule() {  # C2's likely cause, the evolution's fixed seeds: CartPo
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule)
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule observed_units sizes)
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule observed_units sizes" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"

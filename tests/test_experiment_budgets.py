@@ -325,3 +325,22 @@ def test_a_model_stopped_while_it_trains_resumes_from_its_snapshot(evolved, tmp_
     unbroken = evaluation.run_test_phase(study, tmp_path / "unbroken", test, save_agents=False)
     assert trained_with[4:] == ["auto"] * 3  # the evolution's setting
     assert [r["per_seed"] for r in rows] == [r["per_seed"] for r in unbroken]
+
+
+def test_the_estimate_counts_the_reservoir_size(tmp_path):
+    """Every step reads each agent's whole (units, units) W, so 1000-unit reservoirs train ≈ 10× slower than 100-unit
+    ones here (docs/benchmarks.md, "Reservoir size"): the estimate says so for the evolution and the ER-MRL test
+    models, not for the PPO baselines, and counts the reservoir's units, not those the policy observes."""
+    plans = {p.spec.name: p for p in runner.plan(registry.get("observed-units"), registry.get_scale("small"), tmp_path)}
+    evolution = {name: runner.estimate_seconds([p], left={p.study: ()}) - runner.COMPILE_S
+                 for name, p in plans.items()}
+    assert 5 < evolution["1000-of-1000"] / evolution["100-of-100"] < 20
+    assert evolution["100-of-1000"] == evolution["1000-of-1000"]
+    p = plans["1000-of-1000"]
+    (t,) = p.tests
+    whole = runner.estimate_seconds([p], {p.study: p.config.trials})
+    ppo_only = runner.estimate_seconds([dataclasses.replace(p, tests=(dataclasses.replace(t, ermrl_lrs=()),))],
+                                       {p.study: p.config.trials})
+    ppo_seconds = 2 * t.seeds * t.timesteps / runner.JAX_RATE  # PPO on the same and on the full observation
+    assert ppo_only == pytest.approx(runner.COMPILE_S + ppo_seconds)
+    assert 5 < (whole - ppo_only) / (t.seeds * t.timesteps / runner.JAX_RATE) < 20

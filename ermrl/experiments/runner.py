@@ -23,6 +23,10 @@ from ermrl.training import TrainConfig
 
 JAX_RATE = 40_000.0
 """Nominal agent-steps/s of the JAX backend on 2 cores at a generation's population size (docs/benchmarks.md)."""
+WEIGHT_S = 0.25e-9
+"""Seconds per agent-step for each recurrent weight beyond a 100-unit reservoir's. Every step reads the whole
+(units, units) W of every agent from memory, so 1000 units step ≈ 10× slower than 100 (docs/benchmarks.md,
+"Reservoir size"): 9 × 1/JAX_RATE over 1000² − 100² weights. The nominal rates are those of 100-unit reservoirs."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,6 +119,11 @@ def _rate(env_id: str, backend: str) -> float:
 COMPILE_S = 60.0  # compiles of a study with work left: evolution, selection and the test models (15 s each)
 
 
+def reservoir_seconds(agent) -> float:
+    """Extra seconds per agent-step of ``agent``'s (an AgentConfig) reservoirs over 100-unit ones."""
+    return WEIGHT_S * agent.reservoirs * max(agent.spec.units ** 2 - 100 ** 2, 0)
+
+
 def tests_left(p: StudyPlan, study) -> tuple[TestConfig, ...]:
     """The test phases of ``p`` not yet written for the study's current Φ* (all of them before a selection)."""
     from ermrl.evolution.selection import load_selection
@@ -137,15 +146,16 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
     total = 0.0
     for p in plans:
         c = p.config
+        extra = reservoir_seconds(c.train.agent)  # ER-MRL agents only; PPO baselines have no reservoir
         remaining = max(c.trials - done.get(p.study, 0), 0)
         for env_id in c.env_ids:
             rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
-            total += remaining * c.seeds * c.train.total_timesteps / rate
+            total += remaining * c.seeds * c.train.total_timesteps * (1 / rate + extra)
         for t in left.get(p.study, p.tests):
             env_id = t.env_id or c.env_ids[0]
             rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
-            models = len(t.ermrl_lrs) + 1 + (1 if "NoVel" in env_id else 0)
-            total += models * t.seeds * t.timesteps / rate
+            baselines = 1 + (1 if "NoVel" in env_id else 0)
+            total += t.seeds * t.timesteps * (len(t.ermrl_lrs) * (1 / rate + extra) + baselines / rate)
     busy = sum(1 for p in plans if done.get(p.study, 0) < p.config.trials or left.get(p.study, p.tests))
     return total + COMPILE_S * busy
 

@@ -1,0 +1,101 @@
+"""C14 and C15: reservoir variants (sizes, observed units) of one env, each evolved and tested on the same seeds.
+
+Reads the ``summary.json`` of each variant's test phase, as ``benchmarks/reproduce_paper.sh sizes observed_units``
+writes them (``runs/experiments/EXPERIMENT-small/STUDY/test/``, collected under ``docs/data/``). Every test phase
+trains its ER-MRL agents and its PPO baselines on the seeds 1000, 1001, ..., so a variant's seed k and another's
+share the env noise and the policy's initialization, not the reservoirs.
+
+Prints a Markdown table: each variant's ER-MRL row (n, mean ± std, IQM [95% CI], the area under the curve over
+the first 300k steps), then the PPO rows of the first test phase; then, for each ``--compare A B``,
+P(A > B) with its 95% CI (rliable) and the paired difference A − B over the shared seeds (SciPy: BCa CI,
+Wilcoxon p).
+
+Example (C15):
+    .venv/bin/python benchmarks/variant_summary.py \\
+        "100 of 100=docs/data/observed-units-small/100-of-100/test/summary.json" \\
+        "1000 of 1000=docs/data/observed-units-small/1000-of-1000/test/summary.json" \\
+        "100 of 1000=docs/data/observed-units-small/100-of-1000/test/summary.json" \\
+        --compare "100 of 100" "1000 of 1000" --compare "100 of 1000" "1000 of 1000"
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def read_rows(path: Path) -> tuple[dict, list[dict]]:
+    """(the ER-MRL row, the PPO rows) of a test phase's ``summary.json``; it must have one ER-MRL row."""
+    rows = json.loads(path.read_text())
+    ermrl = [r for r in rows if r["kind"] == "ER-MRL"]
+    if len(ermrl) != 1:
+        raise ValueError(f"{path} has {len(ermrl)} ER-MRL rows; give a test phase of one learning rate")
+    return ermrl[0], [r for r in rows if r["kind"] == "PPO"]
+
+
+def per_seed(row: dict) -> dict[int, float]:
+    """{seed: final score} of a row (seeds 1000, 1001, ...; a diverged seed is left out)."""
+    from ermrl.experiments.evaluation import FIRST_TEST_SEED
+
+    return {FIRST_TEST_SEED + i: float(v) for i, v in enumerate(row["per_seed"]) if v is not None}
+
+
+def table(variants: dict[str, Path], comparisons: list[tuple[str, str]]) -> str:
+    """The Markdown table of ``variants`` ({label: summary.json}) and the ``comparisons`` (pairs of labels)."""
+    from ermrl.analysis.statistics import format_ci, paired_difference, probability_of_improvement, summarize
+
+    for a, b in comparisons:
+        for name in (a, b):
+            if name not in variants:
+                raise ValueError(f"--compare names {name!r}, which is none of the variants ({', '.join(variants)})")
+    scores, lines = {}, ["| model | n | mean ± std | IQM [95% CI] | AUC 0–300k |", "|---|---|---|---|---|"]
+
+    def line(name: str, row: dict) -> str:
+        s = summarize(list(per_seed(row).values()))
+        auc = "" if row.get("auc_early_mean") is None else f"{row['auc_early_mean']:.1f}"
+        return f"| {name} | {s.n} | {s.mean:.1f} ± {s.std:.1f} | {format_ci(s.iqm, s.iqm_low, s.iqm_high)} | {auc} |"
+
+    ppo_rows = None
+    for name, path in variants.items():
+        ermrl, ppo = read_rows(path)
+        scores[name] = per_seed(ermrl)
+        lines.append(line(f"ER-MRL, {name}", ermrl))
+        ppo_rows = ppo if ppo_rows is None else ppo_rows
+    lines += [line(r["model"], r) for r in ppo_rows or []]
+    lines.append("")
+    for a, b in comparisons:
+        p = probability_of_improvement(list(scores[a].values()), list(scores[b].values()))
+        shared = sorted(set(scores[a]) & set(scores[b]))
+        diff = paired_difference([scores[a][s] for s in shared], [scores[b][s] for s in shared])
+        lines.append(f"- P({a} > {b}) = {format_ci(*p, digits=2)}; paired {a} − {b} over {len(shared)} seeds: {diff}")
+    return "\n".join(lines) + "\n"
+
+
+def _variant(text: str) -> tuple[str, Path]:
+    label, sep, path = text.partition("=")
+    if not sep or not label or not path:
+        raise argparse.ArgumentTypeError(f"{text!r} is not LABEL=SUMMARY.json (e.g. '25 units=.../test/summary.json')")
+    return label, Path(path)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("variants", nargs="+", type=_variant, metavar="LABEL=SUMMARY.json",
+                        help="a variant's name and its test phase's summary.json")
+    parser.add_argument("--compare", nargs=2, action="append", default=[], metavar=("A", "B"),
+                        help="print P(A > B) and the paired difference A − B (repeatable)")
+    args = parser.parse_args(argv)
+    labels = [label for label, _ in args.variants]
+    if len(set(labels)) != len(labels):
+        parser.error(f"two variants are named {next(x for x in labels if labels.count(x) > 1)!r}; name each once")
+    try:
+        sys.stdout.write(table(dict(args.variants), [tuple(c) for c in args.compare]))
+    except (OSError, ValueError) as e:
+        parser.error(str(e))  # exit code 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
