@@ -344,3 +344,41 @@ def test_the_estimate_counts_the_reservoir_size(tmp_path):
     ppo_seconds = 2 * t.seeds * t.timesteps / runner.JAX_RATE  # PPO on the same and on the full observation
     assert ppo_only == pytest.approx(runner.COMPILE_S + ppo_seconds)
     assert 5 < (whole - ppo_only) / (t.seeds * t.timesteps / runner.JAX_RATE) < 20
+
+
+def test_the_estimate_counts_a_shared_baseline_once_and_a_stored_one_not_at_all(evolved, tmp_path):
+    """With a baseline store, a PPO baseline that two test phases share is estimated once, and one that a real
+    test phase has already stored (found under the same identity as training uses) costs nothing; without a
+    store, every test phase trains its own."""
+    (p,) = [p for p in runner.plan(registry.get(EXPERIMENT), registry.get_scale("smoke"), evolved, budget=BUDGET)
+            if p.spec.name == STUDY]
+    twins = [p, dataclasses.replace(p, study=p.study + "-twin", run_dir=tmp_path / "twin")]
+    done = {q.study: q.config.trials for q in twins}
+    (t,) = p.tests
+    model_s = t.seeds * t.timesteps / runner.JAX_RATE
+    ermrl_s = len(t.ermrl_lrs) * model_s  # 100-unit reservoirs: no extra cost
+    store = tmp_path / "store"
+    assert runner.estimate_seconds(twins, done) == pytest.approx(2 * (runner.COMPILE_S + ermrl_s + 2 * model_s))
+    assert runner.estimate_seconds(twins, done, store=store) == pytest.approx(
+        2 * (runner.COMPILE_S + ermrl_s) + 2 * model_s)  # PPO on the same and on the full observation, once each
+    study = load_study(runner.default_storage(evolved), p.study)
+    evaluation.run_test_phase(study, tmp_path / "test", t, save_agents=False, baseline_store=store)
+    assert sorted(f.parent.name for f in store.glob("*/*.npz")) == ["CartPole-v1", "CartPoleNoVel-v1"]
+    assert runner.estimate_seconds(twins, done, store=store) == pytest.approx(2 * (runner.COMPILE_S + ermrl_s))
+    assert runner.estimate_seconds(twins, done) == pytest.approx(2 * (runner.COMPILE_S + ermrl_s + 2 * model_s))
+
+
+def test_test_phases_of_any_reservoir_size_share_their_baselines(tmp_path):
+    """A PPO baseline has no reservoir, so its identity in a store does not carry the study's units or observed
+    units: C15's three studies (100 of 100, 1000 of 1000, 100 of 1000 units) and C14's six CartPole sizes share
+    one PPO on the same observation and one on the full observation."""
+    from ermrl.experiments.evaluation import baseline_files
+
+    budget = runner.TestBudget(seeds=10, timesteps=1_000_000)
+    plans = [p for name in ("observed-units", "reservoir-sizes")
+             for p in runner.plan(registry.get(name), registry.get_scale("small"), tmp_path, budget=budget)
+             if p.config.env_ids == ("CartPoleNoVel-v1",)]
+    assert len(plans) == 9
+    files = {tuple(baseline_files(p.config, p.tests[0], tmp_path)) for p in plans}
+    assert len(files) == 1
+    assert [f.parent.name for f in next(iter(files))] == ["CartPoleNoVel-v1", "CartPole-v1"]

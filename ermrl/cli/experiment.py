@@ -107,7 +107,7 @@ def _run(args) -> int:
           f"(storage {shown_url(url)})")
     if not args.no_estimate:
         finished = sum(len(p.tests) - len(left.get(p.study, p.tests)) for p in plans)
-        print(f"estimated time: {runner.estimate_seconds(plans, done, left) / 60:.0f} min (rough: nominal throughput, "
+        print(f"estimated time: {runner.estimate_seconds(plans, done, left, args.baseline_store, budget.agents_per_run) / 60:.0f} min (rough: nominal throughput, "
               f"{sum(done.values())} trials and {finished} test phases already done)")
 
     progress, close = bars(args.quiet)

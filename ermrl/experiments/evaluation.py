@@ -22,7 +22,7 @@ import numpy as np
 import optuna
 
 from ermrl import agent_files, envs, storage
-from ermrl.agent import Phi
+from ermrl.agent import AgentConfig, Phi
 from ermrl.analysis import statistics
 from ermrl.envs import masking
 from ermrl.errors import ConfigError
@@ -155,36 +155,25 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     ``test.seeds`` agents), e.g. to write TensorBoard logs of its learning curves and PPO diagnostics."""
     config = storage.decode_study_record(study.user_attrs[ATTR])
     trial, phi, how = chosen_trial(study, config, test.trial)
-    env_id = test.env_id or config.env_ids[0]
-    envs.describe(env_id, config.train.backend)  # an unknown id fails before any training
+    base, seeds, ppo_lr = _settings(config, test)
+    envs.describe(base.env_id, config.train.backend)  # an unknown id fails before any training
     storage.check_folder(out)
-    base = dataclasses.replace(config.train_for(env_id), total_timesteps=test.timesteps)
     if env_workers is not None:
         base = dataclasses.replace(base, env_workers=env_workers)
     k = config.space.reservoirs
-    seeds = list(range(FIRST_TEST_SEED, FIRST_TEST_SEED + test.seeds))
     ermrl_lrs = test.ermrl_lrs or (config.train.ppo.learning_rate,)
-    ppo_lr = config.train.ppo.learning_rate if test.ppo_lr is None else test.ppo_lr
-    base_id, deleted = masking.parse(env_id)
-    plain = dataclasses.replace(base, agent=dataclasses.replace(base.agent, reservoirs=0))
-    if test.recurrent_baseline:  # checked before any training: JAX envs only
-        lstm = dataclasses.replace(plain, ppo=dataclasses.replace(plain.ppo, model="lstm", learning_rate=ppo_lr))
-        recurrent.check(lstm)
+    baselines = baseline_jobs(base, seeds, ppo_lr, test.recurrent_baseline)
+    for _, _, train_config, _, _ in baselines:
+        if train_config.ppo.model == "lstm":  # checked before any training: JAX envs only
+            recurrent.check(train_config)
 
     phi_text = _phi_text(phi, k, trial.number)
     labels = [f"ER-MRL ({phi_text})" if len(ermrl_lrs) == 1 else f"ER-MRL lr {lr:g} ({phi_text})" for lr in ermrl_lrs]
     jobs = [("ER-MRL", base, Population.grid(phi, seeds, list(ermrl_lrs), k), labels)]
     folders = {label: "ermrl" if len(ermrl_lrs) == 1 else f"ermrl-lr-{lr:g}" for label, lr in zip(labels, ermrl_lrs)}
-    no_phi = Phi(1.0, 1.0, 1.0)
-    jobs.append(("PPO", plain, Population.grid(no_phi, seeds, ppo_lr, 0), ["PPO (same observation)"]))
-    folders["PPO (same observation)"] = "ppo"
-    if deleted:
-        jobs.append(("PPO", dataclasses.replace(plain, env_id=base_id), Population.grid(no_phi, seeds, ppo_lr, 0),
-                     ["PPO (full observation)"]))
-        folders["PPO (full observation)"] = "ppo-full-observation"
-    if test.recurrent_baseline:
-        jobs.append(("PPO-LSTM", lstm, Population.grid(no_phi, seeds, ppo_lr, 0), ["PPO-LSTM (same observation)"]))
-        folders["PPO-LSTM (same observation)"] = "ppo-lstm"
+    for kind, folder, train_config, population, model_labels in baselines:
+        jobs.append((kind, train_config, population, model_labels))
+        folders[model_labels[0]] = folder
 
     if agents_per_run is not None and agents_per_run < 1:
         raise ConfigError(f"--agents-per-run must be >= 1, got {agents_per_run}")
@@ -215,8 +204,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
 
     from ermrl.analysis.plots import learning_curves
 
-    title = f"{env_id}: test phase, {test.seeds} new seeds"
-    if evolved_on != [env_id]:
+    title = f"{base.env_id}: test phase, {test.seeds} new seeds"
+    if evolved_on != [base.env_id]:
         title += f"\nΦ* evolved on {', '.join(evolved_on)}"
     with storage.staged_folder(out) as stage:  # all or nothing: summary.json, which marks it complete, last
         for folder, train_config, part, label in agents:
@@ -228,6 +217,46 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
         storage.write_test_summary(stage, rows)
     checkpoints.discard(out)
     return rows
+
+
+def _settings(config, test: TestConfig) -> tuple:
+    """(the ER-MRL model's TrainConfig on the tested env at the test's budget, the test seeds, PPO's learning rate)."""
+    env_id = test.env_id or config.env_ids[0]
+    base = dataclasses.replace(config.train_for(env_id), total_timesteps=test.timesteps)
+    seeds = list(range(FIRST_TEST_SEED, FIRST_TEST_SEED + test.seeds))
+    return base, seeds, config.train.ppo.learning_rate if test.ppo_lr is None else test.ppo_lr
+
+
+def baseline_jobs(base, seeds: list[int], ppo_lr: float, recurrent_baseline: bool = False) -> list[tuple]:
+    """The PPO baselines of a test phase whose ER-MRL model trains with ``base`` (a TrainConfig on the tested env),
+    as (kind, folder, TrainConfig, Population, [label]) each: PPO on the same observation, on the full one (masked
+    envs), and PPO-LSTM if asked; ``seeds`` agents each at learning rate ``ppo_lr``. Their agent is plain PPO,
+    ``AgentConfig(reservoirs=0)``, whatever ``base``'s reservoirs (units, observed units, fed action: unused
+    without a reservoir), so that test phases of reservoirs of any size share their baselines in a store."""
+    base_id, deleted = masking.parse(base.env_id)
+    plain = dataclasses.replace(base, agent=AgentConfig(reservoirs=0))
+    grid = Population.grid(Phi(1.0, 1.0, 1.0), seeds, ppo_lr, 0)
+    jobs = [("PPO", "ppo", plain, grid, ["PPO (same observation)"])]
+    if deleted:
+        jobs.append(("PPO", "ppo-full-observation", dataclasses.replace(plain, env_id=base_id), grid,
+                     ["PPO (full observation)"]))
+    if recurrent_baseline:
+        lstm = dataclasses.replace(plain, ppo=dataclasses.replace(plain.ppo, model="lstm", learning_rate=ppo_lr))
+        jobs.append(("PPO-LSTM", "ppo-lstm", lstm, grid, ["PPO-LSTM (same observation)"]))
+    return jobs
+
+
+def baseline_files(config, test: TestConfig, store: Path, agents_per_run: int | None = None) -> list[Path]:
+    """Where ``store`` keeps (or will keep) the PPO baselines of ``test`` for a study evolved with ``config`` (an
+    EvolveConfig), one path per baseline: what the time estimate of `ermrl experiment run` checks."""
+    base, seeds, ppo_lr = _settings(config, test)
+    paths = []
+    for _, folder, train_config, population, labels in baseline_jobs(base, seeds, ppo_lr, test.recurrent_baseline):
+        n = population.size
+        size = n if agents_per_run is None else min(agents_per_run, n)
+        identity = _shared_identity(_job_identity(folder, labels, train_config, population), size, n)
+        paths.append(baseline_models.path_for(store, identity))
+    return paths
 
 
 def _trained(partial: Path, name: str, labels: list[str], train_config, population: Population,

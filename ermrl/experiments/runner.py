@@ -15,7 +15,7 @@ from ermrl.agent import AgentConfig
 from ermrl.errors import ConfigError
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.search_space import SearchSpace
-from ermrl.experiments.evaluation import TestConfig
+from ermrl.experiments.evaluation import TestConfig, baseline_files
 from ermrl.experiments.registry import Experiment, Scale, StudySpec
 from ermrl.ppo.config import SB3_DEFAULTS
 from ermrl.reservoir import ReservoirSpec
@@ -138,12 +138,16 @@ def tests_left(p: StudyPlan, study) -> tuple[TestConfig, ...]:
 
 
 def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
-                     left: dict[str, tuple[TestConfig, ...]] | None = None) -> float:
+                     left: dict[str, tuple[TestConfig, ...]] | None = None, store: Path | None = None,
+                     agents_per_run: int | None = None) -> float:
     """The experiment's remaining time, from nominal rates, the trials already completed (``done``: study name ->
-    count) and the test phases still to run (``left``: study name -> :func:`tests_left`; default all)."""
+    count) and the test phases still to run (``left``: study name -> :func:`tests_left`; default all). With a
+    baseline ``store`` (``--baseline-store``), a PPO baseline already there costs nothing, and one that several
+    test phases share is counted once; without, every test phase trains its own."""
     done, left = done or {}, left or {}
     rates: dict[str, float] = {}
     total = 0.0
+    counted: set[Path] = set()
     for p in plans:
         c = p.config
         extra = reservoir_seconds(c.train.agent)  # ER-MRL agents only; PPO baselines have no reservoir
@@ -154,8 +158,11 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
         for t in left.get(p.study, p.tests):
             env_id = t.env_id or c.env_ids[0]
             rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
-            baselines = 1 + (1 if "NoVel" in env_id else 0)
-            total += t.seeds * t.timesteps * (len(t.ermrl_lrs) * (1 / rate + extra) + baselines / rate)
+            files = baseline_files(c, t, store if store is not None else Path("."), agents_per_run)
+            if store is not None:
+                files = [f for f in files if f not in counted and not f.exists()]
+                counted.update(files)
+            total += t.seeds * t.timesteps * (len(t.ermrl_lrs) * (1 / rate + extra) + len(files) / rate)
     busy = sum(1 for p in plans if done.get(p.study, 0) < p.config.trials or left.get(p.study, p.tests))
     return total + COMPILE_S * busy
 

@@ -3,8 +3,9 @@
 A LunarLander test model (10 agents × 3M host steps) trains for hours; a stop used to lose all of it. Every few
 minutes :meth:`ermrl.training.Trainer.run` writes, atomically, one file holding:
 
-- the population's :class:`~ermrl.training.AgentState` (policies, optimizer, reservoirs, env carries, keys), leaf
-  by leaf;
+- the population's :class:`~ermrl.training.AgentState` (policies, optimizer, reservoir states and other env
+  carries, keys), leaf by leaf, but the reservoirs' weights: they are fixed, and drawn again from the seeds and Φ
+  (part of the identity) on resume (snapshots written before 2026-11-24 hold them too, and still resume);
 - on the host backend, each env's :class:`~ermrl.envs.host_groups.EpisodeRecord` (how its running episode began
   and the actions since), from which the envs are rebuilt by replay;
 - what the loop has gathered so far: finished episodes (stored sparsely), per-iteration metrics, the finite flags,
@@ -35,7 +36,7 @@ class Snapshot(NamedTuple):
 
     iteration: int
     leaves: list[np.ndarray]
-    """``jax.tree.leaves`` of the (padded) AgentState, each with a leading agent axis."""
+    """``jax.tree.leaves`` of the (padded) AgentState without its reservoirs, each with a leading agent axis."""
     envs: list[EpisodeRecord] | None
     """One record per host env slot; None on the JAX backend (the env states are in ``leaves``)."""
     finished: list[tuple[np.ndarray, np.ndarray]]

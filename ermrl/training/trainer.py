@@ -105,6 +105,12 @@ class AgentState(NamedTuple):
     key: jax.Array
 
 
+def _kept_leaves(state: AgentState) -> list:
+    """The leaves of ``state`` that a snapshot keeps: all but the reservoirs' weights, which never change during
+    training and are drawn again from the seeds and Φ on resume (at 1000 units they are 4 MB an agent)."""
+    return jax.tree.leaves(state._replace(reservoirs=None))
+
+
 class IterationLog(NamedTuple):
     """What one iteration reports per agent."""
 
@@ -283,14 +289,16 @@ class Trainer:
                                      self.n_iterations * steps_per_iter * n, elapsed, compile_s))
             if saver is not None and it + 1 < self.n_iterations:
                 saver(lambda: snapshots.Snapshot(
-                    it + 1, jax.device_get(jax.tree.leaves(state)), self.env.snapshot() if self.host else None,
+                    it + 1, jax.device_get(_kept_leaves(state)), self.env.snapshot() if self.host else None,
                     finished, metrics, finite, compile_s, before + time.perf_counter() - t1))
         return finished, metrics, finite, state, before + time.perf_counter() - t1
 
     def _resume(self, state: AgentState, snap: snapshots.Snapshot) -> AgentState | None:
         """``state`` (just initialized, envs open) brought to ``snap``; None when the snapshot does not fit it
         or its envs do not replay exactly (the run then starts over)."""
-        fresh = jax.tree.leaves(state)
+        whole = len(snap.leaves) == len(jax.tree.leaves(state))  # a snapshot written with its reservoirs (before
+        kept = state if whole else state._replace(reservoirs=None)  # 2026-11-24): restored as it is
+        fresh = jax.tree.leaves(kept)
         if len(fresh) != len(snap.leaves) or any(a.shape != b.shape or a.dtype != b.dtype
                                                  for a, b in zip(fresh, snap.leaves)):
             return None
@@ -300,7 +308,8 @@ class Trainer:
             except ReplayMismatch:
                 return None
         leaves = [jax.device_put(x, like.sharding) for x, like in zip(snap.leaves, fresh)]
-        return jax.tree.unflatten(jax.tree.structure(state), leaves)
+        restored = jax.tree.unflatten(jax.tree.structure(kept), leaves)
+        return restored if whole else restored._replace(reservoirs=state.reservoirs)
 
     def run(self, population: Population, progress_fn: Callable[[Progress], None] | None = None,
             snapshot: Path | None = None, snapshot_every_s: float = 300.0,
