@@ -328,7 +328,7 @@ def test_a_model_stopped_while_it_trains_resumes_from_its_snapshot(evolved, tmp_
 
 
 def test_the_estimate_counts_the_reservoir_size(tmp_path):
-    """Every step reads each agent's whole (units, units) W, so 1000-unit reservoirs train ≈ 10× slower than 100-unit
+    """Every step reads each agent's whole (units, units) W, so 1000-unit reservoirs train ≈ 8× slower than 100-unit
     ones here (docs/benchmarks.md, "Reservoir size"): the estimate says so for the evolution and the ER-MRL test
     models, not for the PPO baselines, and counts the reservoir's units, not those the policy observes."""
     plans = {p.spec.name: p for p in runner.plan(registry.get("observed-units"), registry.get_scale("small"), tmp_path)}

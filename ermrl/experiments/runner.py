@@ -23,10 +23,11 @@ from ermrl.training import TrainConfig
 
 JAX_RATE = 40_000.0
 """Nominal agent-steps/s of the JAX backend on 2 cores at a generation's population size (docs/benchmarks.md)."""
-WEIGHT_S = 0.25e-9
+WEIGHT_S = 0.2e-9
 """Seconds per agent-step for each recurrent weight beyond a 100-unit reservoir's. Every step reads the whole
-(units, units) W of every agent from memory, so 1000 units step ≈ 10× slower than 100 (docs/benchmarks.md,
-"Reservoir size"): 9 × 1/JAX_RATE over 1000² − 100² weights. The nominal rates are those of 100-unit reservoirs."""
+(units, units) W of every agent from memory, so 1000 units step ≈ 8× slower than 100 on a quiet machine
+(docs/benchmarks.md, "Reservoir size": 1/4,375 − 1/34,269 s over 1000² − 100² weights). The nominal rates are
+those of 100-unit reservoirs."""
 
 
 @dataclasses.dataclass(frozen=True)
