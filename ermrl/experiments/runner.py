@@ -53,7 +53,8 @@ class TestBudget:
     timesteps: int | None = None
     """Env steps per agent in every test phase, the long ones (LunarLander) included; None: the scale's."""
     ermrl_lrs: tuple[float, ...] | None = None
-    """ER-MRL's learning rates in every test phase, one model each; None: the study's (e.g. 3e-4 1e-4 5e-5)."""
+    """ER-MRL's learning rates in every test phase, one model each; None: the study's (e.g. 3e-4 1e-4 5e-5).
+    The PPO baselines keep the study's rate (SB3's default, 3e-4)."""
     agents_per_run: int | None = None
     """Train each test model in groups of at most N agents (a seed at one learning rate), each kept when it
     finishes, so that a stop loses one group at most: for models longer than one sitting (LunarLander at 3M).
