@@ -75,7 +75,9 @@ def test_paired_difference_equals_scipys_and_drops_unfinished_pairs():
     assert tied.p == pytest.approx(scipy.stats.wilcoxon([20.0, 50.0, 20.0]).pvalue)
     same = statistics.paired_difference([2.0, 3.0], [1.0, 2.0])
     assert (same.mean, same.low, same.high) == (1.0, 1.0, 1.0)
-    assert str(same) == "+1 [+1, +1], Wilcoxon p = 0.50, 2 of 2 above"
+    assert str(same) == "+1 [+1, +1], Wilcoxon p = 0.5, 2 of 2 above"
+    all_above = statistics.paired_difference(np.arange(10.0) + 1.0, np.zeros(10))  # exact p = 2 / 2**10
+    assert "Wilcoxon p = 0.002, 10 of 10 above" in str(all_above)
     with pytest.raises(ValueError, match="at least 2 finite pairs, got 1"):
         statistics.paired_difference([1.0, None], [0.0, 1.0])
     with pytest.raises(ValueError, match=r"the same length, got \(2,\) and \(3,\)"):

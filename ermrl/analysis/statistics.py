@@ -144,7 +144,8 @@ class PairedDifference:
     """Pairs where x > y."""
 
     def __str__(self) -> str:
-        return (f"{self.mean:+.3g} [{self.low:+.3g}, {self.high:+.3g}], Wilcoxon p = {self.p:.2f}, "
+        """Two significant digits for p, so that a small one (10 of 10 pairs on one side: 0.002) is not shown as 0."""
+        return (f"{self.mean:+.3g} [{self.low:+.3g}, {self.high:+.3g}], Wilcoxon p = {self.p:.2g}, "
                 f"{self.n_above} of {self.n} above")
 
 
