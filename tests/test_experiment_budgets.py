@@ -346,6 +346,27 @@ def test_the_estimate_counts_the_reservoir_size(tmp_path):
     assert 5 < (whole - ppo_only) / (t.seeds * t.timesteps / runner.JAX_RATE) < 20
 
 
+def test_the_estimate_counts_the_selection_until_one_of_the_current_top_is_stored(evolved, tmp_path):
+    """The selection re-evaluates the top trials on new seeds at the evolution's budget (at `small`, 3 trials × 3
+    seeds of 50k steps beside the evolution's 18 × 2): the estimate counts it until the study stores a selection of
+    its current top with the scale's number of seeds, and again when one was made with another number."""
+    (p,) = [p for p in runner.plan(registry.get(EXPERIMENT), registry.get_scale("small"), tmp_path)
+            if p.spec.name == STUDY]
+    assert (p.config.trials, p.config.seeds, p.select_top, p.select_seeds) == (18, 2, 3, 3)
+    run_s = p.config.train.total_timesteps / runner.JAX_RATE
+    assert runner.estimate_seconds([p], left={p.study: ()}) == pytest.approx(runner.COMPILE_S + (36 + 9) * run_s)
+    evolved_only = {p.study: p.config.trials}
+    assert runner.estimate_seconds([p], evolved_only, {p.study: ()}, unselected={p.study}) == pytest.approx(
+        runner.COMPILE_S + 9 * run_s)
+    assert runner.estimate_seconds([p], evolved_only, {p.study: ()}, unselected=set()) == 0
+    (q,) = [q for q in runner.plan(registry.get(EXPERIMENT), registry.get_scale("smoke"), evolved)
+            if q.spec.name == STUDY]
+    study = load_study(runner.default_storage(evolved), q.study)
+    assert not runner.selection_left(q, study)
+    assert runner.selection_left(dataclasses.replace(q, select_seeds=q.select_seeds + 1), study)
+    assert runner.selection_left(q, None)
+
+
 def test_the_estimate_counts_a_shared_baseline_once_and_a_stored_one_not_at_all(evolved, tmp_path):
     """With a baseline store, a PPO baseline that two test phases share is estimated once, and one that a real
     test phase has already stored (found under the same identity as training uses) costs nothing; without a

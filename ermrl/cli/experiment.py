@@ -94,20 +94,23 @@ def _run(args) -> int:
         envs.describe(env_id, args.backend)  # every env exists and its simulator is installed, before any work
     url = args.storage or runner.default_storage(folder)
     make_storage(url)
-    done, left = {}, {}
+    done, left, unselected = {}, {}, {p.study for p in plans}
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     for p in plans:
         try:
             study = optuna.load_study(study_name=p.study, storage=make_storage(url))
             done[p.study] = len(study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,)))
             left[p.study] = runner.tests_left(p, study)
+            if not runner.selection_left(p, study):
+                unselected.discard(p.study)
         except KeyError:
             pass
     print(f"experiment {experiment.name} at {scale.name} scale: {len(plans)} studies in {folder} "
           f"(storage {shown_url(url)})")
     if not args.no_estimate:
         finished = sum(len(p.tests) - len(left.get(p.study, p.tests)) for p in plans)
-        print(f"estimated time: {runner.estimate_seconds(plans, done, left, args.baseline_store, budget.agents_per_run) / 60:.0f} min (rough: nominal throughput, "
+        seconds = runner.estimate_seconds(plans, done, left, args.baseline_store, budget.agents_per_run, unselected)
+        print(f"estimated time: {seconds / 60:.0f} min (rough: nominal throughput, "
               f"{sum(done.values())} trials and {finished} test phases already done)")
 
     progress, close = bars(args.quiet)

@@ -40,6 +40,10 @@ class StudyPlan:
     run_dir: Path
     config: EvolveConfig
     tests: tuple[TestConfig, ...]
+    select_top: int = 0
+    select_seeds: int = 0
+    """Selection after the evolution: the top ``select_top`` trials, each re-evaluated on ``select_seeds`` new seeds
+    at the evolution's budget (the scale's values)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,7 +108,7 @@ def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "aut
                                  env_id=None if (e,) == spec.envs else e, auc_steps=min(300_000, steps))
                       for e in spec.tested_on)
         name = f"{experiment.name}-{scale.name}-{spec.name}"
-        plans.append(StudyPlan(spec, name, folder / spec.name, config, tests))
+        plans.append(StudyPlan(spec, name, folder / spec.name, config, tests, scale.select_top, scale.select_seeds))
     return plans
 
 
@@ -126,6 +130,17 @@ def reservoir_seconds(agent) -> float:
     return WEIGHT_S * agent.reservoirs * max(agent.spec.units ** 2 - 100 ** 2, 0)
 
 
+def selection_left(p: StudyPlan, study) -> bool:
+    """Whether the study's selection is still to run: none stored, or one of other trials (the evolution went on
+    since) or another number of seeds."""
+    from ermrl.evolution.selection import load_selection, ranked_trials
+
+    sel = load_selection(study) if study is not None else None
+    if sel is None:
+        return True
+    return sel.trials != tuple(t.number for t in ranked_trials(study)[:p.select_top]) or len(sel.seeds) != p.select_seeds
+
+
 def tests_left(p: StudyPlan, study) -> tuple[TestConfig, ...]:
     """The test phases of ``p`` not yet written for the study's current Φ* (all of them before a selection)."""
     from ermrl.evolution.selection import load_selection
@@ -141,22 +156,27 @@ def tests_left(p: StudyPlan, study) -> tuple[TestConfig, ...]:
 
 def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
                      left: dict[str, tuple[TestConfig, ...]] | None = None, store: Path | None = None,
-                     agents_per_run: int | None = None) -> float:
+                     agents_per_run: int | None = None, unselected: set[str] | None = None) -> float:
     """The experiment's remaining time, from nominal rates, the trials already completed (``done``: study name ->
-    count) and the test phases still to run (``left``: study name -> :func:`tests_left`; default all). With a
-    baseline ``store`` (``--baseline-store``), a PPO baseline already there costs nothing, and one that several
-    test phases share is counted once; without, every test phase trains its own."""
+    count), the studies whose selection is still to run (``unselected``: names, see :func:`selection_left`;
+    default those with trials left) and the test phases still to run (``left``: study name -> :func:`tests_left`;
+    default all). With a baseline ``store`` (``--baseline-store``), a PPO baseline already there costs nothing, and
+    one that several test phases share is counted once; without, every test phase trains its own."""
     done, left = done or {}, left or {}
+    if unselected is None:
+        unselected = {p.study for p in plans if done.get(p.study, 0) < p.config.trials}
     rates: dict[str, float] = {}
     total = 0.0
     counted: set[Path] = set()
     for p in plans:
         c = p.config
         extra = reservoir_seconds(c.train.agent)  # ER-MRL agents only; PPO baselines have no reservoir
-        remaining = max(c.trials - done.get(p.study, 0), 0)
+        remaining = max(c.trials - done.get(p.study, 0), 0) * c.seeds
+        if p.study in unselected:
+            remaining += p.select_top * p.select_seeds
         for env_id in c.env_ids:
             rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
-            total += remaining * c.seeds * c.train.total_timesteps * (1 / rate + extra)
+            total += remaining * c.train.total_timesteps * (1 / rate + extra)
         for t in left.get(p.study, p.tests):
             env_id = t.env_id or c.env_ids[0]
             rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
@@ -165,7 +185,7 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
                 files = [f for f in files if f not in counted and not f.exists()]
                 counted.update(files)
             total += t.seeds * t.timesteps * (len(t.ermrl_lrs) * (1 / rate + extra) + len(files) / rate)
-    busy = sum(1 for p in plans if done.get(p.study, 0) < p.config.trials or left.get(p.study, p.tests))
+    busy = sum(1 for p in plans if p.study in unselected or left.get(p.study, p.tests))
     return total + COMPILE_S * busy
 
 
@@ -183,7 +203,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
 
     from ermrl.analysis.experiment_report import write_experiment_report
     from ermrl.evolution.evolve import evolve, make_trainers
-    from ermrl.evolution.selection import load_selection, ranked_trials, select
+    from ermrl.evolution.selection import load_selection, select
     from ermrl.evolution.study import ATTR, make_sampler, open_study
     from ermrl.experiments import baseline_runs, baselines, checkpoints
     from ermrl.experiments.evaluation import run_test_phase, test_dir
@@ -207,9 +227,8 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
         bar = progress(f"evolve {p.spec.name}") if progress else None
         evolve(study, config, make_trainers(config), (lambda g: bar(g.train) if g.train else None) if bar else None)
         sel = load_selection(study)
-        top = tuple(t.number for t in ranked_trials(study)[:scale.select_top])
-        if sel is None or sel.trials != top or len(sel.seeds) != scale.select_seeds:
-            sel = select(study, config, scale.select_top, scale.select_seeds, progress)
+        if selection_left(p, study):
+            sel = select(study, config, p.select_top, p.select_seeds, progress)
         log(f"    Φ* = trial {sel.winner} (selected among the top {len(sel.trials)} on {len(sel.seeds)} fresh seeds)")
         for t in p.tests:
             out = test_dir(p.run_dir, study.user_attrs[ATTR], t.env_id)
