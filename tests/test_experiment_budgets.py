@@ -349,7 +349,8 @@ def test_the_estimate_counts_the_reservoir_size(tmp_path):
 def test_the_estimate_counts_the_selection_until_one_of_the_current_top_is_stored(evolved, tmp_path):
     """The selection re-evaluates the top trials on new seeds at the evolution's budget (at `small`, 3 trials × 3
     seeds of 50k steps beside the evolution's 18 × 2): the estimate counts it until the study stores a selection of
-    its current top with the scale's number of seeds, and again when one was made with another number."""
+    its current top with the scale's number of seeds, and again when one was made with another number; the CLI
+    asks the storage, so a rerun with everything done estimates 0."""
     (p,) = [p for p in runner.plan(registry.get(EXPERIMENT), registry.get_scale("small"), tmp_path)
             if p.spec.name == STUDY]
     assert (p.config.trials, p.config.seeds, p.select_top, p.select_seeds) == (18, 2, 3, 3)
@@ -365,6 +366,9 @@ def test_the_estimate_counts_the_selection_until_one_of_the_current_top_is_store
     assert not runner.selection_left(q, study)
     assert runner.selection_left(dataclasses.replace(q, select_seeds=q.select_seeds + 1), study)
     assert runner.selection_left(q, None)
+    r = cli(*[a for a in RUN if a != "--no-estimate"], "--out", str(evolved), *FLAGS)  # a rerun: all done
+    assert r.returncode == 0, r.stderr
+    assert "estimated time: 0 min (rough: nominal throughput, 2 trials and 1 test phases already done)" in r.stdout
 
 
 def test_the_estimate_counts_a_shared_baseline_once_and_a_stored_one_not_at_all(evolved, tmp_path):
