@@ -143,7 +143,7 @@ step_observed_units() {  # C15: CartPoleNoVel reading 100 of 100, 1000 of 1000 a
   .venv/bin/python benchmarks/variant_summary.py "100 of 100=$d/100-of-100/test/summary.json" \
       "1000 of 1000=$d/1000-of-1000/test/summary.json" "100 of 1000=$d/100-of-1000/test/summary.json" \
       --compare "100 of 100" "1000 of 1000" --compare "100 of 1000" "1000 of 1000" \
-      --compare "100 of 1000" "100 of 100" | tee "$d/summary.md"
+      --compare "100 of 1000" "100 of 100" --figure "$d/curves.png" | tee "$d/summary.md"
 }
 step_sizes() {  # C14: CartPoleNoVel and PendulumNoVel at 25 to 1000 units, small evolutions, each tested 10 × 1M
   # (the two Humanoid studies of the experiment, ≈ 245 h at the paper's scale, are left out here)
@@ -154,7 +154,7 @@ step_sizes() {  # C14: CartPoleNoVel and PendulumNoVel at 25 to 1000 units, smal
     args=()
     for n in 25 50 100 200 500 1000; do args+=("$n units=$d/$env-${n}u/test/summary.json"); done
     for n in 25 50 200 500 1000; do args+=(--compare "$n units" "100 units"); done
-    .venv/bin/python benchmarks/variant_summary.py "${args[@]}" | tee "$d/$env.md"
+    .venv/bin/python benchmarks/variant_summary.py "${args[@]}" --figure "$d/$env.png" | tee "$d/$env.md"
   done
 }
 step_probe() {  # H1, C4: velocity R² of each H1 study's Φ*, against the default Φ and a memoryless one (1 reservoir)

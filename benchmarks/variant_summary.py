@@ -8,14 +8,16 @@ share the env noise and the policy's initialization, not the reservoirs.
 Prints a Markdown table: each variant's ER-MRL row (n, mean ± std, IQM [95% CI], the area under the curve over
 the first 300k steps), then the PPO rows of the first test phase; then, for each ``--compare A B``,
 P(A > B) with its 95% CI (rliable) and the paired difference A − B over the shared seeds (SciPy: BCa CI,
-Wilcoxon p).
+Wilcoxon p). With ``--figure PATH``, it also draws the variants' ER-MRL learning curves (mean ± std over the
+seeds) and the first test phase's PPO curves on one plot, from the ``curves.csv`` beside each ``summary.json``.
 
 Example (C15):
     .venv/bin/python benchmarks/variant_summary.py \\
         "100 of 100=docs/data/observed-units-small/100-of-100/test/summary.json" \\
         "1000 of 1000=docs/data/observed-units-small/1000-of-1000/test/summary.json" \\
         "100 of 1000=docs/data/observed-units-small/100-of-1000/test/summary.json" \\
-        --compare "100 of 100" "1000 of 1000" --compare "100 of 1000" "1000 of 1000"
+        --compare "100 of 100" "1000 of 1000" --compare "100 of 1000" "1000 of 1000" \\
+        --figure docs/data/observed-units-small/curves.png
 """
 
 from __future__ import annotations
@@ -73,6 +75,23 @@ def table(variants: dict[str, Path], comparisons: list[tuple[str, str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def curves(variants: dict[str, Path]) -> dict[str, tuple]:
+    """{"ER-MRL, LABEL": (timesteps (I,), values (S, I))} of each variant's ER-MRL model, then the PPO curves of
+    the first variant's test phase, read from the ``curves.csv`` beside each ``summary.json``."""
+    from ermrl.storage import read_curves_csv
+
+    out, ppo = {}, None
+    for label, path in variants.items():
+        ermrl, rows = read_rows(path)
+        read = read_curves_csv(path.parent / "curves.csv")
+        if ermrl["model"] not in read:
+            raise ValueError(f"{path.parent / 'curves.csv'} has no curve of {ermrl['model']!r}; give the curves.csv "
+                             "written with this summary.json")
+        out[f"ER-MRL, {label}"] = read[ermrl["model"]]
+        ppo = {r["model"]: read[r["model"]] for r in rows if r["model"] in read} if ppo is None else ppo
+    return {**out, **(ppo or {})}
+
+
 def _variant(text: str) -> tuple[str, Path]:
     label, sep, path = text.partition("=")
     if not sep or not label or not path:
@@ -86,12 +105,22 @@ def main(argv=None) -> int:
                         help="a variant's name and its test phase's summary.json")
     parser.add_argument("--compare", nargs=2, action="append", default=[], metavar=("A", "B"),
                         help="print P(A > B) and the paired difference A − B (repeatable)")
+    parser.add_argument("--figure", type=Path, metavar="PATH.png",
+                        help="also draw every variant's ER-MRL learning curve and the PPO curves there")
     args = parser.parse_args(argv)
     labels = [label for label, _ in args.variants]
     if len(set(labels)) != len(labels):
         parser.error(f"two variants are named {next(x for x in labels if labels.count(x) > 1)!r}; name each once")
     try:
-        sys.stdout.write(table(dict(args.variants), [tuple(c) for c in args.compare]))
+        variants = dict(args.variants)
+        text = table(variants, [tuple(c) for c in args.compare])
+        drawn = curves(variants) if args.figure is not None else None  # read before anything is written
+        sys.stdout.write(text)
+        if drawn is not None:
+            from ermrl.analysis.plots import learning_curves
+
+            env_id = json.loads(args.variants[0][1].read_text())[0].get("env_id", "")
+            learning_curves(drawn, f"{env_id}: reservoir variants, test phase", args.figure.with_suffix(".png"))
     except (OSError, ValueError) as e:
         parser.error(str(e))  # exit code 2
     return 0

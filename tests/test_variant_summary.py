@@ -1,10 +1,14 @@
 """benchmarks/variant_summary.py (C14, C15): reservoir variants' test phases, compared seed by seed."""
 
+import importlib.util
 import json
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from ermrl import storage
 from ermrl.analysis.statistics import format_ci, paired_difference, probability_of_improvement, summarize
 
 SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "variant_summary.py"
@@ -41,6 +45,34 @@ def test_table_gives_every_variant_and_pairs_their_seeds(tmp_path):
     assert f"- P(100 units > 1000 units) = {p}; paired 100 units − 1000 units over 9 seeds: {paired}" in done.stdout
 
 
+def _curves(folder: Path, ermrl: np.ndarray, models=("ER-MRL lr 0.0001", "PPO (same observation)")) -> None:
+    """Writes folder/curves.csv: ``ermrl`` (S, 3) for the ER-MRL model, a flat PPO curve, at 2048, 4096, 6144."""
+    steps = np.array([2048, 4096, 6144])
+    values = {models[0]: ermrl, models[1]: np.full_like(ermrl, 40.0)}
+    storage.write_curves_csv(folder / "curves.csv", {m: (steps, values[m]) for m in models},
+                             {m: np.arange(1000, 1000 + len(ermrl)) for m in models})
+
+
+def test_figure_draws_each_variants_curve_and_the_ppo_curves(tmp_path):
+    """--figure: the ER-MRL curve of each variant, named by its label, then the first test phase's PPO curve,
+    read back from each curves.csv; drawn as a PNG."""
+    small, large = _summary(tmp_path / "small", SMALL), _summary(tmp_path / "large", LARGE)
+    rising = np.array([[20.0, 200.0, 480.0], [30.0, 250.0, 500.0]])
+    _curves(small.parent, rising)
+    _curves(large.parent, rising / 2)
+    done = _run(f"100 units={small}", f"1000 units={large}", "--figure", tmp_path / "fig.png")
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "fig.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    spec = importlib.util.spec_from_file_location("variant_summary", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    drawn = module.curves({"100 units": small, "1000 units": large})
+    assert list(drawn) == ["ER-MRL, 100 units", "ER-MRL, 1000 units", "PPO (same observation)"]
+    np.testing.assert_array_equal(drawn["ER-MRL, 100 units"][0], [2048, 4096, 6144])
+    np.testing.assert_array_equal(drawn["ER-MRL, 1000 units"][1], rising / 2)
+    np.testing.assert_array_equal(drawn["PPO (same observation)"][1], np.full((2, 3), 40.0))
+
+
 def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
     small = _summary(tmp_path / "small", SMALL)
     two_rates = _summary(tmp_path / "two", SMALL, LARGE)
@@ -50,10 +82,16 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
         ((f"a={small}", f"a={small}"), "two variants are named 'a'; name each once"),
         ((str(small),), f"{str(small)!r} is not LABEL=SUMMARY.json"),
         ((f"a={tmp_path / 'missing.json'}",), "No such file or directory"),
+        ((f"a={small}", "--figure", tmp_path / "f.png"), "No such file or directory"),  # no curves.csv beside it
     ]
+    other = _summary(tmp_path / "other", SMALL)
+    _curves(other.parent, np.ones((2, 3)), models=("ER-MRL lr 0.0003", "PPO (same observation)"))
+    cases.append(((f"a={other}", "--figure", tmp_path / "f.png"),
+                  f"{other.parent / 'curves.csv'} has no curve of 'ER-MRL lr 0.0001'; give the curves.csv"))
     for args, message in cases:
         done = _run(*args)
         assert done.returncode == 2, (args, done.stderr)
         last = done.stderr.strip().splitlines()[-1]  # after argparse's usage lines: the one-line error
         assert last.startswith("variant_summary.py: error: ") and message in last, (args, done.stderr)
         assert done.stdout == ""
+    assert not (tmp_path / "f.png").exists()
