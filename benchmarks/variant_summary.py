@@ -1,6 +1,7 @@
-"""C14 and C15: reservoir variants (sizes, observed units) of one env, each evolved and tested on the same seeds.
+"""C14, C15, C17: reservoir variants (sizes, observed units, other HPs) of one env, trained on the same seeds.
 
-Reads the ``summary.json`` of each variant's test phase, as ``benchmarks/reproduce_paper.sh sizes observed_units``
+Reads the ``summary.json`` of each variant's test phase (or of an ``ermrl train`` run, for C17's sweep of
+ReservoirPy's other hyperparameters), as ``benchmarks/reproduce_paper.sh sizes observed_units``
 writes them (``runs/experiments/EXPERIMENT-small/STUDY/test/``, collected under ``docs/data/``). Every test phase
 trains its ER-MRL agents and its PPO baselines on the seeds 1000, 1001, ..., so a variant's seed k and another's
 share the env noise and the policy's initialization, not the reservoirs.
@@ -29,8 +30,14 @@ from pathlib import Path
 
 
 def read_rows(path: Path) -> tuple[dict, list[dict]]:
-    """(the ER-MRL row, the PPO rows) of a test phase's ``summary.json``; it must have one ER-MRL row."""
+    """(the ER-MRL row, the PPO rows) of a test phase's ``summary.json``, which must have one ER-MRL row; or of an
+    ``ermrl train`` run's (one model, no PPO rows; its row holds ``scores``, {seed: final score})."""
     rows = json.loads(path.read_text())
+    if isinstance(rows, dict):
+        if "seeds" not in rows or "fitness" not in rows:
+            raise ValueError(f"{path} is neither a test phase's nor an `ermrl train` run's summary.json")
+        scores = {int(s): float(f) for s, f in zip(rows["seeds"], rows["fitness"]) if f is not None and f == f}
+        return {"model": None, "kind": "ER-MRL", "scores": scores}, []
     ermrl = [r for r in rows if r["kind"] == "ER-MRL"]
     if len(ermrl) != 1:
         raise ValueError(f"{path} has {len(ermrl)} ER-MRL rows; give a test phase of one learning rate")
@@ -38,8 +45,11 @@ def read_rows(path: Path) -> tuple[dict, list[dict]]:
 
 
 def per_seed(row: dict) -> dict[int, float]:
-    """{seed: final score} of a row (seeds 1000, 1001, ...; a diverged seed is left out)."""
+    """{seed: final score} of a row (a test phase's seeds are 1000, 1001, ...; a diverged seed is left out)."""
     from ermrl.experiments.evaluation import FIRST_TEST_SEED
+
+    if "scores" in row:
+        return row["scores"]
 
     return {FIRST_TEST_SEED + i: float(v) for i, v in enumerate(row["per_seed"]) if v is not None}
 
@@ -84,6 +94,8 @@ def curves(variants: dict[str, Path]) -> dict[str, tuple]:
     for label, path in variants.items():
         ermrl, rows = read_rows(path)
         read = read_curves_csv(path.parent / "curves.csv")
+        if ermrl["model"] is None and len(read) == 1:  # an `ermrl train` run: its one model
+            ermrl = {**ermrl, "model": next(iter(read))}
         if ermrl["model"] not in read:
             raise ValueError(f"{path.parent / 'curves.csv'} has no curve of {ermrl['model']!r}; give the curves.csv "
                              "written with this summary.json")
@@ -119,7 +131,8 @@ def main(argv=None) -> int:
         if drawn is not None:
             from ermrl.analysis.plots import learning_curves
 
-            env_id = json.loads(args.variants[0][1].read_text())[0].get("env_id", "")
+            first = json.loads(args.variants[0][1].read_text())
+            env_id = (first if isinstance(first, dict) else first[0]).get("env_id", "")
             learning_curves(drawn, f"{env_id}: reservoir variants, test phase", args.figure.with_suffix(".png"))
     except (OSError, ValueError) as e:
         parser.error(str(e))  # exit code 2

@@ -47,9 +47,12 @@ class ReservoirSpec:
         for name in ("rc_connectivity", "input_connectivity"):
             value = getattr(self, name)
             if not 0.0 < value <= 1.0:
-                raise ConfigError(f"{name} must be in (0, 1], got {value}")
+                raise ConfigError(f"{name} must be in (0, 1], got {value}; it is a fraction of the weights "
+                                  "(ReservoirPy's default: 0.1)")
         if self.bias not in ("bernoulli", "none"):
             raise ConfigError(f"bias must be 'bernoulli' or 'none', got {self.bias!r}")
+        if not 0.0 <= self.bias_scaling < float("inf"):
+            raise ConfigError(f"bias_scaling must be a finite number >= 0, got {self.bias_scaling}")
 
 
 class ReservoirWeights(NamedTuple):

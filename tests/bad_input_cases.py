@@ -33,6 +33,11 @@ CASES = [
     ("train --backend gpu", "ermrl train: error: argument --backend: invalid choice: 'gpu' (choose from 'auto', "
                             "'jax', 'host'); see `ermrl train --help`"),
     ("train --reservoirs -1", "ermrl train: error: reservoirs must be >= 0, got -1"),
+    ("train --rc-connectivity 0", "ermrl train: error: rc_connectivity must be in (0, 1], got 0.0; it is a fraction "
+                                  "of the weights (ReservoirPy's default: 0.1)"),
+    ("evolve --input-connectivity 1.5", "ermrl evolve: error: input_connectivity must be in (0, 1], got 1.5; it is a "
+                                        "fraction of the weights (ReservoirPy's default: 0.1)"),
+    ("train --bias-scaling -1", "ermrl train: error: bias_scaling must be a finite number >= 0, got -1.0"),
     ("train --observed-units 1000", "ermrl train: error: observed_units must be in [1, 100], got 1000"),
     ("train --env-workers -1", "ermrl train: error: argument --env-workers: must be 'auto' or an integer >= 0, got "
                                "'-1'; see `ermrl train --help`"),
@@ -72,8 +77,9 @@ CASES = [
                                 "did you mean 'units'?"),
     ("train --config evolvekey.toml",
      "ermrl train: error: config file evolvekey.toml: unknown option 'trials' for `ermrl train`; options here: "
-     "backend, bias, env, env-workers, feed-action, first-seed, iss, lr, lstm-hidden, lstm-seq-len, model, no-reservoir, "
-     "observed-units, out, ppo-lr, preset, quiet, reservoirs, save-agents, seeds, skip-connection, snapshot-every, sr, "
+     "backend, bias, bias-scaling, env, env-workers, feed-action, first-seed, input-connectivity, iss, lr, lstm-hidden, "
+     "lstm-seq-len, model, no-reservoir, observed-units, out, ppo-lr, preset, quiet, rc-connectivity, reservoirs, "
+     "save-agents, seeds, skip-connection, snapshot-every, sr, "
      "tensorboard, "
      "timesteps, units"),
     ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "

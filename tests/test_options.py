@@ -6,6 +6,7 @@ import re
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from ermrl.agent import AgentConfig
@@ -29,6 +30,7 @@ def options_of(parser) -> dict[str, argparse.Action]:
 def test_every_training_command_takes_every_agent_option_from_one_definition():
     commands = {name: options_of(subparser(name)) for name in ("train", "evolve", "baselines")}
     expected_defaults = {"reservoirs": AgentConfig.reservoirs, "units": ReservoirSpec.units, "bias": ReservoirSpec.bias,
+                         "rc_connectivity": 0.1, "input_connectivity": 0.1, "bias_scaling": 1.0,  # ReservoirPy's
                          "feed_action": AgentConfig.feed_action, "skip_connection": False,
                          "observed_units": AgentConfig.observed_units, "preset": "sb3", "ppo_lr": None,
                          "timesteps": TrainConfig.total_timesteps, "backend": TrainConfig.backend,
@@ -83,6 +85,23 @@ def test_the_run_folder_stores_the_effective_config(tmp_path):
     config = json.loads((out / "config.json").read_text())
     assert config["train"]["agent"]["spec"]["units"] == 30 and config["train"]["total_timesteps"] == 2048
     assert config["options"]["units"] == 30 and config["options"]["seeds"] == 1
+
+
+def test_reservoirpy_hyperparameters_reach_the_reservoirs_drawn(tmp_path):
+    """--rc-connectivity, --input-connectivity and --bias-scaling (C17's sweep) are stored in the run's config, and
+    the reservoir of a saved agent, drawn again from it, has that many non-zero weights and that bias."""
+    from ermrl import load_agent
+
+    out = tmp_path / "run"
+    r = ermrl("train", "--seeds", "1", "--timesteps", "2048", "--rc-connectivity", "0.5", "--input-connectivity", "1",
+              "--bias-scaling", "0.25", "--out", str(out), "--quiet")
+    assert r.returncode == 0, r.stderr
+    spec = json.loads((out / "config.json").read_text())["train"]["agent"]["spec"]
+    assert (spec["rc_connectivity"], spec["input_connectivity"], spec["bias_scaling"]) == (0.5, 1.0, 0.25)
+    agent = load_agent(out)
+    (W,), (Win,), (bias,) = agent._W, agent._Win, agent._bias  # one reservoir
+    assert np.count_nonzero(W) == 5000 and np.count_nonzero(Win) == Win.size == 100 * 5  # CartPoleNoVel: 2 + 2 + 1
+    np.testing.assert_array_equal(np.abs(bias), np.full(100, 0.25, np.float32))
 
 
 @pytest.mark.parametrize("text, suffix, message", [

@@ -73,6 +73,34 @@ def test_figure_draws_each_variants_curve_and_the_ppo_curves(tmp_path):
     np.testing.assert_array_equal(drawn["PPO (same observation)"][1], np.full((2, 3), 40.0))
 
 
+def test_an_ermrl_train_run_is_a_variant_too(tmp_path):
+    """C17's sweep trains each variant with `ermrl train` (seeds 1000, 1001): its summary.json and curves.csv are
+    read like a test phase's, paired seed by seed with a test phase's ER-MRL row."""
+    run = tmp_path / "sparse"
+    done = subprocess.run([sys.executable, "-m", "ermrl.cli", "train", "--seeds", "2", "--first-seed", "1000",
+                           "--timesteps", "4096", "--rc-connectivity", "0.05", "--no-save-agents", "--quiet",
+                           "--out", str(run)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    trained = json.loads((run / "summary.json").read_text())
+    scores = dict(zip(trained["seeds"], trained["fitness"]))
+    phase = _summary(tmp_path / "phase", [300.0, 100.0])
+    _curves(phase.parent, np.array([[10.0, 200.0, 300.0], [10.0, 50.0, 100.0]]))
+    done = _run(f"sparse={run / 'summary.json'}", f"default={phase}", "--compare", "sparse", "default",
+                "--figure", tmp_path / "fig.png")
+    assert done.returncode == 0, done.stderr
+    s = summarize(list(scores.values()))
+    assert f"| ER-MRL, sparse | 2 | {s.mean:.1f} ± {s.std:.1f} | {format_ci(s.iqm, s.iqm_low, s.iqm_high)} |  |" \
+        in done.stdout
+    paired = paired_difference([scores[1000], scores[1001]], [300.0, 100.0])
+    assert f"paired sparse − default over 2 seeds: {paired}" in done.stdout
+    assert (tmp_path / "fig.png").read_bytes()[:4] == b"\x89PNG"
+    (bad := tmp_path / "bad.json").write_text(json.dumps({"seeds": [1000]}))
+    done = _run(f"a={bad}")
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines()[-1].endswith(
+        f"{bad} is neither a test phase's nor an `ermrl train` run's summary.json")
+
+
 def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
     small = _summary(tmp_path / "small", SMALL)
     two_rates = _summary(tmp_path / "two", SMALL, LARGE)

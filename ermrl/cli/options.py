@@ -106,6 +106,9 @@ def _groups() -> dict[str, list[Option]]:
             Option("--reservoirs", AgentConfig, "reservoirs", kwargs={"type": int}),
             Option("--units", ReservoirSpec, "units", kwargs={"type": int}),
             Option("--bias", ReservoirSpec, "bias", kwargs={"choices": ["bernoulli", "none"]}),
+            Option("--rc-connectivity", ReservoirSpec, "rc_connectivity", kwargs={"type": float}),
+            Option("--input-connectivity", ReservoirSpec, "input_connectivity", kwargs={"type": float}),
+            Option("--bias-scaling", ReservoirSpec, "bias_scaling", kwargs={"type": float}),
             Option("--feed-action", AgentConfig, "feed_action", kwargs={"choices": ["previous", "none"]}),
             Option("--skip-connection", AgentConfig, "skip_connection", kwargs={"action": "store_true"}),
             Option("--observed-units", AgentConfig, "observed_units", kwargs={"type": int}),
@@ -157,8 +160,8 @@ def _groups() -> dict[str, list[Option]]:
     }
 
 
-AGENT_DESTS = ("reservoirs", "units", "bias", "feed_action", "skip_connection", "observed_units", "preset",
-               "ppo_lr", "timesteps", "backend", "env_workers")
+AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connectivity", "bias_scaling", "feed_action",
+               "skip_connection", "observed_units", "preset", "ppo_lr", "timesteps", "backend", "env_workers")
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
 
@@ -183,7 +186,8 @@ def agent_config(args, reservoirs: int | None = None):
     from ermrl.agent import AgentConfig
     from ermrl.reservoir import ReservoirSpec
 
-    spec = ReservoirSpec(units=args.units, bias=args.bias)
+    spec = ReservoirSpec(units=args.units, rc_connectivity=args.rc_connectivity,
+                         input_connectivity=args.input_connectivity, bias=args.bias, bias_scaling=args.bias_scaling)
     return AgentConfig(reservoirs=args.reservoirs if reservoirs is None else reservoirs, spec=spec,
                        feed_action=args.feed_action, skip_connection=args.skip_connection,
                        observed_units=args.observed_units)
