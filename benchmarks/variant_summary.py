@@ -37,11 +37,26 @@ def read_rows(path: Path) -> tuple[dict, list[dict]]:
         if "seeds" not in rows or "fitness" not in rows:
             raise ValueError(f"{path} is neither a test phase's nor an `ermrl train` run's summary.json")
         scores = {int(s): float(f) for s, f in zip(rows["seeds"], rows["fitness"]) if f is not None and f == f}
-        return {"model": None, "kind": "ER-MRL", "scores": scores}, []
+        return {"model": None, "kind": "ER-MRL", "scores": scores, "auc_early_mean": _early_auc(path)}, []
     ermrl = [r for r in rows if r["kind"] == "ER-MRL"]
     if len(ermrl) != 1:
         raise ValueError(f"{path} has {len(ermrl)} ER-MRL rows; give a test phase of one learning rate")
     return ermrl[0], [r for r in rows if r["kind"] == "PPO"]
+
+
+def _early_auc(summary: Path, steps: int = 300_000) -> float | None:
+    """The mean over seeds of an ``ermrl train`` run's learning curve over its first ``steps`` (as a test phase's
+    ``auc_early_mean``), from the ``curves.csv`` beside ``summary``; None without one."""
+    import numpy as np
+
+    from ermrl.storage import read_curves_csv
+
+    path = summary.parent / "curves.csv"
+    if not path.is_file():
+        return None
+    (timesteps, values), = read_curves_csv(path).values()
+    with np.errstate(all="ignore"):
+        return float(np.nanmean(np.nanmean(values[:, timesteps <= steps], axis=1)))
 
 
 def per_seed(row: dict) -> dict[int, float]:

@@ -75,7 +75,8 @@ def test_figure_draws_each_variants_curve_and_the_ppo_curves(tmp_path):
 
 def test_an_ermrl_train_run_is_a_variant_too(tmp_path):
     """C17's sweep trains each variant with `ermrl train` (seeds 1000, 1001): its summary.json and curves.csv are
-    read like a test phase's, paired seed by seed with a test phase's ER-MRL row."""
+    read like a test phase's (its AUC: the curve's mean over the first 300k steps), paired seed by seed with a
+    test phase's ER-MRL row."""
     run = tmp_path / "sparse"
     done = subprocess.run([sys.executable, "-m", "ermrl.cli", "train", "--seeds", "2", "--first-seed", "1000",
                            "--timesteps", "4096", "--rc-connectivity", "0.05", "--no-save-agents", "--quiet",
@@ -89,8 +90,10 @@ def test_an_ermrl_train_run_is_a_variant_too(tmp_path):
                 "--figure", tmp_path / "fig.png")
     assert done.returncode == 0, done.stderr
     s = summarize(list(scores.values()))
-    assert f"| ER-MRL, sparse | 2 | {s.mean:.1f} ± {s.std:.1f} | {format_ci(s.iqm, s.iqm_low, s.iqm_high)} |  |" \
-        in done.stdout
+    (_, curve), = storage.read_curves_csv(run / "curves.csv").values()  # (2 seeds, 2 updates): AUC over all
+    auc = np.nanmean(np.nanmean(curve, axis=1))
+    assert f"| ER-MRL, sparse | 2 | {s.mean:.1f} ± {s.std:.1f} | {format_ci(s.iqm, s.iqm_low, s.iqm_high)} | " \
+           f"{auc:.1f} |" in done.stdout
     paired = paired_difference([scores[1000], scores[1001]], [300.0, 100.0])
     assert f"paired sparse − default over 2 seeds: {paired}" in done.stdout
     assert (tmp_path / "fig.png").read_bytes()[:4] == b"\x89PNG"
