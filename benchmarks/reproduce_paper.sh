@@ -240,21 +240,25 @@ step_seed_schedule() {  # C2's likely cause, the evolution's fixed seeds: CartPo
   done
 }
 step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time around its defaults (connectivities
-  # 0.1, bias ±1 on 10% of the units), with the default Φ (sr 0.95, lr 0.5, iss 1) on CartPoleNoVel, 10 seeds
-  # (1000-1009) × 300k each (the evolution's budget); a stopped run resumes from its OUT.snapshot
-  local d=docs/data/other-hps v name dir args=() compare=()
+  # 0.1, bias ±1 on 10% of the units), with the default Φ (sr 0.95, lr 0.5, iss 1) on CartPoleNoVel and
+  # PendulumNoVel, 10 seeds (1000-1009) × 300k each (the evolution's budget); a stopped run resumes from its snapshot
+  local env d v name dir args compare
   local variants=("default|" "rc 0.02|--rc-connectivity 0.02" "rc 1|--rc-connectivity 1"
                   "input 0.5|--input-connectivity 0.5" "input 1|--input-connectivity 1" "no bias|--bias none"
                   "bias 0.1|--bias-scaling 0.1")
-  for v in "${variants[@]}"; do
-    name=${v%%|*}; dir=$d/${name// /-}
-    # shellcheck disable=SC2086  # the flags split into words on purpose
-    [ -f "$dir/summary.json" ] || "$E" train --env CartPoleNoVel-v1 --seeds 10 --first-seed 1000 --timesteps 300000 \
-        ${v#*|} --no-save-agents --quiet --out "$dir"
-    args+=("$name=$dir/summary.json")
-    [ "$name" = default ] || compare+=(--compare "$name" default)
+  for env in CartPoleNoVel-v1 PendulumNoVel-v1; do
+    d=docs/data/other-hps/$env args=() compare=()
+    for v in "${variants[@]}"; do
+      name=${v%%|*}; dir=$d/${name// /-}
+      # shellcheck disable=SC2086  # the flags split into words on purpose
+      [ -f "$dir/summary.json" ] || "$E" train --env "$env" --seeds 10 --first-seed 1000 --timesteps 300000 \
+          ${v#*|} --no-save-agents --quiet --out "$dir"
+      args+=("$name=$dir/summary.json")
+      [ "$name" = default ] || compare+=(--compare "$name" default)
+    done
+    .venv/bin/python benchmarks/variant_summary.py "${args[@]}" "${compare[@]}" --figure "$d/curves.png" \
+        | tee "$d/summary.md"
   done
-  .venv/bin/python benchmarks/variant_summary.py "${args[@]}" "${compare[@]}" --figure "$d/curves.png" | tee "$d/summary.md"
 }
 
 steps=("$@")

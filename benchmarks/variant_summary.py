@@ -148,7 +148,7 @@ def main(argv=None) -> int:
 
             first = json.loads(args.variants[0][1].read_text())
             env_id = (first if isinstance(first, dict) else first[0]).get("env_id", "")
-            learning_curves(drawn, f"{env_id}: reservoir variants, test phase", args.figure.with_suffix(".png"))
+            learning_curves(drawn, f"{env_id}: reservoir variants, the same seeds", args.figure.with_suffix(".png"))
     except (OSError, ValueError) as e:
         parser.error(str(e))  # exit code 2
     return 0
