@@ -80,3 +80,14 @@ def postgres_url(postgres_server, request):
         conn.execute(f'DROP DATABASE IF EXISTS "{name}"')
         conn.execute(f'CREATE DATABASE "{name}"')
     return postgres_server.rsplit("/", 1)[0] + "/" + name
+
+
+# -- the smoke study of CartPoleNoVel that the budget and estimate tests share ----------------------------------
+
+@pytest.fixture(scope="session")
+def evolved(tmp_path_factory):
+    """smoke_study's study, evolved, selected and tested once per session by the CLI; tests read it, and copy it
+    before they change it."""
+    from smoke_study import evolve
+
+    return evolve(tmp_path_factory.mktemp("evolved"))
