@@ -147,16 +147,18 @@ def phi_text(phi: Phi) -> str:
 
 
 def reservoir_states(env_id: str, rollouts: Rollouts, phi: Phi, *, units: int = 100, seed: int = 0,
-                     feed_action: str = "previous") -> np.ndarray:
+                     feed_action: str = "previous", spec: ReservoirSpec | None = None) -> np.ndarray:
     """Contexts c_t (T, K·units) of K reservoirs with Φ = ``phi`` (scalar fields: K = 1; (K,) fields: K
     reservoirs) and ``seed``, fed each episode of ``rollouts`` as the agent on ``env_id`` is: reset and fed
-    (o_0, zeros, 0), then (masked o_t, a_{t−1}, r_{t−1})."""
+    (o_0, zeros, 0), then (masked o_t, a_{t−1}, r_{t−1}). ``spec`` sets the reservoir's static settings
+    (connectivities, bias; its units replace ``units``); None: ReservoirPy's defaults with ``units``."""
     base_id, deleted = masking.parse(env_id)
     if base_id != rollouts.base_id:
         raise ConfigError(f"rollouts come from {rollouts.base_id!r}, not {base_id!r}; collect them from {base_id!r}")
     info = describe(env_id, base_id, deleted)
     phi = as_k(phi)
-    config = AgentConfig(reservoirs=len(phi.sr), spec=ReservoirSpec(units=units), feed_action=feed_action)
+    spec = ReservoirSpec(units=units) if spec is None else spec
+    config = AgentConfig(reservoirs=len(phi.sr), spec=spec, feed_action=feed_action)
     res = Agent.build(Agent(config, info).unit_weights(seed), phi)
     start = rollouts.t == 0
     prev_action = np.roll(rollouts.actions, 1, axis=0)
@@ -196,7 +198,8 @@ def _r2(features: np.ndarray, targets: np.ndarray, train: np.ndarray, test: np.n
 
 def probe(env_id: str, phi: Phi = MEMORY, *, units: int = 100, seed: int = 0, episodes: int = 300,
           alpha: float = DEFAULT_ALPHA, feed_action: str = "previous", horizon: int = 5, washout: int = 0,
-          test_fraction: float = 0.25, label: str | None = None, rollouts: Rollouts | None = None) -> ProbeResult:
+          test_fraction: float = 0.25, label: str | None = None, rollouts: Rollouts | None = None,
+          spec: ReservoirSpec | None = None) -> ProbeResult:
     """Probes the context of a reservoir with Φ = ``phi`` on the NoVel env ``env_id`` (e.g. 'CartPoleNoVel-v1').
 
     ``episodes`` random episodes (seeded with ``seed``, or the given ``rollouts`` of the base env) are split by
@@ -204,7 +207,8 @@ def probe(env_id: str, phi: Phi = MEMORY, *, units: int = 100, seed: int = 0, ep
     t < ``washout`` in their episode are left out of fitting and scoring (the velocity at t = 0 is the env's
     random initial state, which no observation has revealed yet). On CartPoleNoVel the default 0 costs little:
     300 episodes give velocity R² 0.998 with washout 0 and 0.999 with 3. Future targets keep only the steps
-    whose t + k lies within the same episode.
+    whose t + k lies within the same episode. ``spec``: the reservoir's static settings, as in
+    :func:`reservoir_states`.
     """
     base_id, deleted = masking.parse(env_id)
     if not deleted:
@@ -224,7 +228,8 @@ def probe(env_id: str, phi: Phi = MEMORY, *, units: int = 100, seed: int = 0, ep
     if not 1 <= n_test < rollouts.n_episodes:
         raise ConfigError(f"{rollouts.n_episodes} episodes leave no train or test episode at test_fraction "
                           f"{test_fraction}; collect more episodes")
-    states = reservoir_states(env_id, rollouts, phi, units=units, seed=seed, feed_action=feed_action)
+    states = reservoir_states(env_id, rollouts, phi, units=units, seed=seed, feed_action=feed_action,
+                              spec=spec)
     features = states.astype(np.float64)
     is_test = rollouts.episode >= rollouts.n_episodes - n_test
     used = rollouts.t >= washout
