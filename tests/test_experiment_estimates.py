@@ -91,3 +91,15 @@ def test_test_phases_of_any_reservoir_size_share_their_baselines(tmp_path):
     files = {tuple(baseline_files(p.config, p.tests[0], tmp_path)) for p in plans}
     assert len(files) == 1
     assert [f.parent.name for f in next(iter(files))] == ["CartPoleNoVel-v1", "CartPole-v1"]
+
+
+def test_an_estimate_on_a_busy_machine_says_it_may_be_several_times_too_short():
+    """The estimates assume free cores; a load average above 0.75 per core (another training: ≈ 2 on 2 cores)
+    adds a one-line note, an idle machine none."""
+    from ermrl.cli.common import busy_note
+
+    assert busy_note(load=2.1, cores=2) == ("note: the machine looks busy (load average 2.1 on 2 cores); the estimate "
+                                           "assumes free cores, and training beside another job can take several "
+                                           "times longer")
+    assert busy_note(load=1.5, cores=2) is None and busy_note(load=0.2, cores=2) is None
+    assert busy_note(load=2.1, cores=4) is None

@@ -264,6 +264,8 @@ def cmd_evolve(args) -> int:
         print(f"estimated time: {eta / 60:.1f} min ({-(-(args.trials - done) // batch)} "
               + ("generations" if batch == config.generation_size else f"batches of {batch} trials, for this worker "
                  "alone") + ", from one measured iteration per env)")
+        if eta >= 60 and (note := common.busy_note()):
+            print(note)
     with EvolutionBar(args.trials, config.generation_size, len(env_ids), enabled=not args.quiet) as bar:
         evolve(study, config, trainers, bar.update, worker, lambda line: print(line, flush=True))
     best = study.best_trial

@@ -1,5 +1,6 @@
 """What the commands share: the study options (--study, --storage, --out), where a study's folder and storage
-are, and progress bars for commands that train several models in turn."""
+are, progress bars for commands that train several models in turn, and the note under a time estimate when
+the machine looks busy."""
 
 from __future__ import annotations
 
@@ -71,3 +72,28 @@ def bars(quiet: bool):
             bar.__exit__(None, None, None)
 
     return progress, close
+
+
+BUSY_LOAD_PER_CORE = 0.75
+"""A 1-minute load average above this many runnable processes per core means another job holds the cores."""
+
+
+def busy_note(load: float | None = None, cores: int | None = None) -> str | None:
+    """A note to print under a time estimate when the machine looks busy, else None. ``load``: the 1-minute load
+    average (default: the system's); ``cores``: the CPUs this process may use (default: its affinity).
+
+    The estimates assume free cores. Beside another training they are several times too short: a host-env run's
+    main process and env workers hand over at every step, and on 2 cores it ran ≈ 4× slower beside another job
+    (docs/benchmarks.md, "Host backend: Ant-v5")."""
+    import os
+
+    if load is None:
+        try:
+            load = os.getloadavg()[0]
+        except OSError:  # not available on this platform
+            return None
+    cores = cores or len(os.sched_getaffinity(0))
+    if load <= BUSY_LOAD_PER_CORE * cores:
+        return None
+    return (f"note: the machine looks busy (load average {load:.1f} on {cores} cores); the estimate assumes free "
+            "cores, and training beside another job can take several times longer")

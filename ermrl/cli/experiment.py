@@ -65,7 +65,7 @@ def _run(args) -> int:
     import optuna
 
     from ermrl import envs, storage
-    from ermrl.cli.common import bars
+    from ermrl.cli.common import bars, busy_note
     from ermrl.evolution.study import make_storage, shown_url
     from ermrl.experiments import registry, runner
 
@@ -112,6 +112,8 @@ def _run(args) -> int:
         seconds = runner.estimate_seconds(plans, done, left, args.baseline_store, budget.agents_per_run, unselected)
         print(f"estimated time: {seconds / 60:.0f} min (rough: nominal throughput, "
               f"{sum(done.values())} trials and {finished} test phases already done)")
+        if seconds >= 60 and (note := busy_note()):
+            print(note)
 
     progress, close = bars(args.quiet)
     try:
