@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from ermrl import reservoir
-from ermrl.analysis.rhythm import DRIFT_CYCLES, peak_cycles, plot_spectra, rhythm_score, spectrum, summed
+from ermrl.analysis.rhythm import (DRIFT_CYCLES, agent_rhythm, compare_runs, peak_cycles, plot_spectra, rhythm_score,
+                                   spectrum, summed)
 from ermrl.errors import ConfigError
 
 T = 1024
@@ -119,3 +120,33 @@ def test_cli_context_and_fft_on_saved_agents(tmp_path):
     empty.mkdir()
     r = ermrl("analyze", "fft", str(empty), "--out", str(fig))
     assert r.stderr == f"ermrl analyze: error: {empty} holds no saved agent; train with --save-agents (the default) first\n"
+
+
+def test_agents_whose_episode_is_too_short_are_left_out_and_named(tmp_path):
+    """A test phase's agent may fall at once (an Ant after 1M steps ended its episode in 7): that agent is left
+    out of the rhythm table and named under it, and the others are scored; a run whose every agent is short is a
+    one-line error. Real agents: Pendulum's episodes last 200 steps, an early CartPoleNoVel agent's far fewer."""
+    import subprocess
+    import sys
+
+    from ermrl.agent_files import find_agents
+
+    def ermrl(*args):
+        return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, timeout=600)
+
+    for env in ("PendulumNoVel-v1", "CartPoleNoVel-v1"):
+        r = ermrl("train", "--env", env, "--timesteps", "2048", "--seeds", "1", "--quiet", "--out", str(tmp_path / env))
+        assert r.returncode == 0, r.stderr
+    pendulum, cartpole = (find_agents(tmp_path / env)[0] for env in ("PendulumNoVel-v1", "CartPoleNoVel-v1"))
+    cartpole_steps = agent_rhythm(cartpole)["steps"]
+    assert cartpole_steps < 100
+    table, rows = compare_runs({"mixed": [pendulum, cartpole]}, tmp_path / "fft.png", min_steps=100)
+    assert [row["agent"] for row in rows] == [str(pendulum)]
+    assert table.splitlines()[2].startswith("| mixed | 1 | 200 | ") and table.splitlines()[2].endswith(" | 1 |")
+    assert table.splitlines()[-1] == (f"Left out: {cartpole}: the episode lasted {cartpole_steps} steps, too few for a "
+                                      "spectrum.")
+    r = ermrl("analyze", "fft", str(tmp_path / "PendulumNoVel-v1"), "--max-steps", "5", "--out", str(tmp_path / "f.png"))
+    assert (r.returncode, r.stderr) == (2, f"ermrl analyze: error: every agent of {tmp_path / 'PendulumNoVel-v1'} ended "
+                                           f"its episode in under 8 steps, too few for a spectrum (first: {pendulum}: "
+                                           "the episode lasted 5 steps, too few for a spectrum); use agents that "
+                                           "survive longer or a larger --max-steps\n")

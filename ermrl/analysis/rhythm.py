@@ -114,10 +114,19 @@ def plot_spectra(named_signals: dict[str, np.ndarray], path: Path | str, dt: flo
     return save_figure(fig, Path(path).with_suffix(".png"))
 
 
-def agent_rhythm(agent_file: Path | str, seed: int = 0, max_steps: int | None = None) -> dict:
+MIN_STEPS = 8
+"""The shortest episode whose spectrum is computed: below it an FFT has too few frequencies to place a peak."""
+
+
+class ShortEpisode(ConfigError):
+    """A saved agent's episode ended before ``MIN_STEPS`` steps (e.g. an Ant that falls at once)."""
+
+
+def agent_rhythm(agent_file: Path | str, seed: int = 0, max_steps: int | None = None,
+                 min_steps: int = MIN_STEPS) -> dict:
     """One deterministic episode of a saved agent (reset with ``seed``): the rhythm score of its summed
     observation and of its summed policy input (the context c_t; for plain PPO, the observation itself), and both
-    summed signals (T,) for plotting."""
+    summed signals (T,) for plotting. Raises :class:`ShortEpisode` when the episode lasts under ``min_steps``."""
     from ermrl.analysis.context import record_episode
     from ermrl.saved_agent import load_agent
 
@@ -127,9 +136,9 @@ def agent_rhythm(agent_file: Path | str, seed: int = 0, max_steps: int | None = 
         obs, context, rewards = record_episode(agent, env, seed, max_steps)
     finally:
         env.close()
-    if len(obs) < 8:
-        raise ConfigError(f"{agent_file}: the episode lasted {len(obs)} steps, too few for a spectrum; "
-                          "use an agent that survives longer or a larger --max-steps")
+    if len(obs) < min_steps:
+        raise ShortEpisode(f"{agent_file}: the episode lasted {len(obs)} steps, too few for a spectrum; "
+                           "use an agent that survives longer or a larger --max-steps")
     o, c = summed(obs), summed(context)
     return {"agent": str(agent_file), "env_id": agent.env_id, "reservoirs": agent.config.reservoirs,
             "steps": len(obs), "return": float(rewards.sum()), "rhythm_observation": rhythm_score(o),
@@ -138,35 +147,47 @@ def agent_rhythm(agent_file: Path | str, seed: int = 0, max_steps: int | None = 
 
 
 def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0,
-                 max_steps: int | None = None) -> tuple[str, list[dict]]:
+                 max_steps: int | None = None, min_steps: int = MIN_STEPS) -> tuple[str, list[dict]]:
     """Rhythm of every saved agent of each named source (label -> agent files, e.g. a test phase's ER-MRL and
     PPO agents). Returns a Markdown table (one row per source: the mean ± std over its agents of the rhythm of the
     summed observation and of the summed policy input, and for agents with reservoirs the paired difference input −
     observation over its agents, the paper's "the context is more rhythmic than the observation"; and how many
     agents' peaks are drifts, observation / input) and the per-agent rows; plots the spectra of the first agent of
-    each source at ``path``."""
+    each source at ``path``. An agent whose episode lasts under ``min_steps`` is left out and named below the
+    table (a source left with none is an error)."""
     from ermrl.analysis.statistics import paired_difference
 
     rows, lines = [], ["| run | agents | episode steps | rhythm, summed observation | rhythm, summed policy input "
-                       f"| input − observation, paired [95% CI] | drifts (peak < {DRIFT_CYCLES} cycles), obs / input |",
-                       "|---|---:|---:|---|---|---|---|"]
-    signals = {}
+                       f"| input − observation, paired [95% CI] | drifts (peak < {DRIFT_CYCLES} cycles), obs / input "
+                       f"| left out (episode < {min_steps} steps) |",
+                       "|---|---:|---:|---|---|---|---|---:|"]
+    signals, left_out_all = {}, []
     for label, files in sources.items():
         if not files:
             raise ConfigError(f"{label} holds no saved agent; train with --save-agents (the default) first")
-        found = [{**agent_rhythm(f, seed, max_steps), "run": label} for f in files]
+        found, left_out = [], []
+        for f in files:
+            try:
+                found.append({**agent_rhythm(f, seed, max_steps, min_steps), "run": label})
+            except ShortEpisode as error:
+                left_out.append(str(error).split(";")[0])
+        if not found:
+            raise ConfigError(f"every agent of {label} ended its episode in under {min_steps} steps, too few for a "
+                              f"spectrum (first: {left_out[0]}); use agents that survive longer or a larger --max-steps")
+        left_out_all += left_out
         rows += found
         obs, inp = (np.array([r[k] for r in found]) for k in ("rhythm_observation", "rhythm_input"))
         steps = np.mean([r["steps"] for r in found])
         paired = str(paired_difference(inp, obs)) if found[0]["reservoirs"] and len(found) >= 2 else "—"
         lines.append(f"| {label} | {len(found)} | {steps:.0f} | {obs.mean():.3f} ± {obs.std():.3f} | "
                      f"{inp.mean():.3f} ± {inp.std():.3f} | {paired} | {_drifts(found, 'observation')} / "
-                     f"{_drifts(found, 'input')} |")
+                     f"{_drifts(found, 'input')} | {len(left_out)} |")
         short = Path(label).name or label
         signals[f"{short}: summed observation"] = found[0]["summed_observation"]
         if found[0]["reservoirs"]:
             signals[f"{short}: summed context"] = found[0]["summed_input"]
     plot_spectra(signals, path)
+    lines += [""] * bool(left_out_all) + [f"Left out: {reason}." for reason in left_out_all]
     return "\n".join(lines) + "\n", [{k: v for k, v in r.items() if not k.startswith("summed")} for r in rows]
 
 
