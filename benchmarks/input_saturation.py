@@ -73,6 +73,7 @@ def main(argv=None) -> int:
     p.add_argument("--episodes", type=int, default=100, help="random-policy episodes per env (default: 100)")
     p.add_argument("--out", type=Path, help="also write the table here (markdown)")
     a = p.parse_args(argv)
+    from ermrl import storage
     from ermrl.envs import masking
     from ermrl.errors import ConfigError
     from ermrl.reservoir import ReservoirSpec
@@ -86,6 +87,8 @@ def main(argv=None) -> int:
                 raise ConfigError(f"{env!r} deletes no velocity, so there is nothing to probe; use one of {known}")
         for c in a.input_connectivity:
             ReservoirSpec(input_connectivity=c)
+        if a.out:
+            storage.check_file(a.out, example="saturation.md")
         rows = [r for env in a.env for r in measure(env, a.input_connectivity, a.draws, a.episodes)]
     except ConfigError as error:
         print(f"input_saturation.py: error: {error}", file=sys.stderr)
@@ -94,7 +97,7 @@ def main(argv=None) -> int:
     print(text, end="")
     if a.out:
         a.out.parent.mkdir(parents=True, exist_ok=True)
-        a.out.write_text(text)
+        storage.write_text(a.out, text)
     return 0
 
 

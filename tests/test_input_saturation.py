@@ -55,3 +55,9 @@ def test_bad_input_is_one_line_before_any_rollout():
     assert (done.returncode, done.stderr) == (2, "input_saturation.py: error: input_connectivity must be in (0, 1], "
                                                  "got 0.0; it is a fraction of the weights (ReservoirPy's default: "
                                                  "0.1)\n")
+    done = _run("--draws", 0)
+    assert (done.returncode, done.stderr) == (2, "input_saturation.py: error: --draws must be >= 1 and --episodes >= 2, "
+                                                 "got 0 and 100\n")
+    done = _run("--out", SCRIPT.parent)
+    assert (done.returncode, done.stderr) == (2, f"input_saturation.py: error: --out {SCRIPT.parent} is a folder; give a "
+                                                 f"file path such as {SCRIPT.parent / 'saturation.md'}\n")
