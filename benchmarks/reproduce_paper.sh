@@ -50,7 +50,12 @@ restore() {
 STORE=docs/data/baseline-models
 
 run() {  # run EXPERIMENT SCALE ARGS...: one experiment at one scale, its journal under docs/data/
-  local name=$1 scale=$2; shift 2
+  local name=$1 scale=$2 other; shift 2
+  # a journal elsewhere that holds this experiment's studies would be ignored (they would be evolved again)
+  for other in $(grep -l "\"study_name\": *\"$name-$scale-" docs/data/*/*.log 2>/dev/null); do
+    [ "$other" = "docs/data/$name-$scale/studies.log" ] || echo "warning: $other holds studies of $name at $scale," \
+        "but this step reads docs/data/$name-$scale/studies.log; move the journal there to continue them" >&2
+  done
   restore "$name-$scale"
   trap "stash '$name-$scale'" EXIT  # also when the run is stopped (Ctrl-C, a failure)
   "$E" experiment run "$name" --scale "$scale" --storage "docs/data/$name-$scale/studies.log" \
