@@ -92,7 +92,7 @@ def busy_note(load: float | None = None, cores: int | None = None) -> str | None
             load = os.getloadavg()[0]
         except OSError:  # not available on this platform
             return None
-    cores = cores or len(os.sched_getaffinity(0))
+    cores = cores or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
     if load <= BUSY_LOAD_PER_CORE * cores:
         return None
     return (f"note: the machine looks busy (load average {load:.1f} on {cores} cores); the estimate assumes free "
