@@ -226,7 +226,7 @@ def test_a_study_from_before_a_config_field_existed_still_resumes(tmp_path):
     with pytest.raises(Exception, match="already exists with another config"):
         open_study(url, "old", make_sampler("random", 6, 0), encode_study_record(tiny(trials=1, space=SearchSpace())))
     journal = tmp_path / "committed.log"
-    shutil.copy(Path(__file__).parent.parent / "docs" / "data" / "generalization-small" / "studies.log", journal)
+    shutil.copy(Path(__file__).parent.parent / "docs" / "data" / "generalization-morphology-small" / "studies.log", journal)
     study = load_study(f"journal:{journal}", "generalization-morphology-small-to-ant")
     stored = decode_study_record(study.user_attrs["ermrl"])
     open_study(f"journal:{journal}", study.study_name, make_sampler("cmaes", 9, 0), encode_study_record(stored))
