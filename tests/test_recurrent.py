@@ -174,6 +174,8 @@ def test_update_trains_on_whole_windows(rollout, monkeypatch):
     assert np.isfinite(float(metrics["value_loss"]))
 
 
+@pytest.mark.slow  # ≈ 60 s of the default suite; PPO-LSTM's learning is also checked against sb3-contrib in
+# tests/test_parity_recurrent.py; its rollout, minibatch windows and update are checked above
 def test_learns_masked_cartpole_where_plain_ppo_cannot():
     """Plain PPO on the masked observation stays near 45 (tests/test_train.py); the LSTM recovers the velocities.
     Measured at these settings (SB3's PPO defaults, 64 LSTM units, 100k steps): seeds 0-2 reach fitness 300, 132,

@@ -1,5 +1,8 @@
 """ermrl.analysis.rhythm: spectra and the rhythm score, on plain signals and on real reservoirs."""
 
+import subprocess
+import sys
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -70,27 +73,35 @@ def test_plot_and_errors(tmp_path):
         plot_spectra({}, tmp_path / "empty.png")
 
 
-def test_cli_context_and_fft_on_saved_agents(tmp_path):
+def ermrl(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    """Real saved agents, trained once for this module's CLI tests: PendulumNoVel ER-MRL and plain PPO (2 seeds
+    each, 200-step episodes) and CartPoleNoVel ER-MRL (1 seed, whose early episodes are far shorter)."""
+    folder = tmp_path_factory.mktemp("saved")
+    for name, env, seeds, extra in [("ermrl", "PendulumNoVel-v1", "2", []),
+                                    ("ppo", "PendulumNoVel-v1", "2", ["--no-reservoir"]),
+                                    ("cartpole", "CartPoleNoVel-v1", "1", [])]:
+        r = ermrl("train", "--env", env, "--timesteps", "2048", "--seeds", seeds, "--quiet", "--out",
+                  str(folder / name), *extra)
+        assert r.returncode == 0, r.stderr
+    return folder
+
+
+def test_cli_context_and_fft_on_saved_agents(saved, tmp_path):
     """`ermrl analyze context` and `ermrl analyze fft` on real saved agents (ER-MRL and PPO, 2 seeds each): the
     fft table has one row per run with both agents; for PPO the policy input is the observation, so its two
     rhythm scores are equal; the per-agent JSON and the figures are written."""
     import json
-    import subprocess
-    import sys
 
-    def ermrl(*args):
-        return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, timeout=600)
-
-    runs = {"ermrl": [], "ppo": ["--no-reservoir"]}
-    for name, extra in runs.items():
-        r = ermrl("train", "--env", "PendulumNoVel-v1", "--timesteps", "2048", "--seeds", "2", "--quiet",
-                  "--out", str(tmp_path / name), *extra)
-        assert r.returncode == 0, r.stderr
-    r = ermrl("analyze", "context", str(tmp_path / "ermrl"))
+    r = ermrl("analyze", "context", str(saved / "ermrl"))
     assert r.returncode == 0, r.stderr
-    assert (tmp_path / "ermrl" / "context.png").read_bytes().startswith(b"\x89PNG")
+    assert (saved / "ermrl" / "context.png").read_bytes().startswith(b"\x89PNG")
     fig = tmp_path / "fft.png"
-    r = ermrl("analyze", "fft", str(tmp_path / "ermrl"), str(tmp_path / "ppo"), "--out", str(fig))
+    r = ermrl("analyze", "fft", str(saved / "ermrl"), str(saved / "ppo"), "--out", str(fig))
     assert r.returncode == 0, r.stderr
     lines = fig.with_suffix(".md").read_text().splitlines()
     assert [line.split(" | ")[1] for line in lines[2:]] == ["2", "2"]
@@ -111,7 +122,7 @@ def test_cli_context_and_fft_on_saved_agents(tmp_path):
     for args, message in [
         (["fft", str(tmp_path / "nothing"), "--out", str(fig)],
          f"{tmp_path / 'nothing'} does not exist; give a run folder or a saved agent file (.npz)"),
-        (["context", str(tmp_path / "ppo")], f"{tmp_path / 'ppo' / 'agents' / 'seed0.npz'} is a plain PPO agent: it "
+        (["context", str(saved / "ppo")], f"{saved / 'ppo' / 'agents' / 'seed0.npz'} is a plain PPO agent: it "
                                               "has no reservoir to plot; give an ER-MRL agent"),
     ]:
         r = ermrl("analyze", *args)
@@ -122,22 +133,13 @@ def test_cli_context_and_fft_on_saved_agents(tmp_path):
     assert r.stderr == f"ermrl analyze: error: {empty} holds no saved agent; train with --save-agents (the default) first\n"
 
 
-def test_agents_whose_episode_is_too_short_are_left_out_and_named(tmp_path):
+def test_agents_whose_episode_is_too_short_are_left_out_and_named(saved, tmp_path):
     """A test phase's agent may fall at once (an Ant after 1M steps ended its episode in 7): that agent is left
     out of the rhythm table and named under it, and the others are scored; a run whose every agent is short is a
     one-line error. Real agents: Pendulum's episodes last 200 steps, an early CartPoleNoVel agent's far fewer."""
-    import subprocess
-    import sys
-
     from ermrl.agent_files import find_agents
 
-    def ermrl(*args):
-        return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, timeout=600)
-
-    for env in ("PendulumNoVel-v1", "CartPoleNoVel-v1"):
-        r = ermrl("train", "--env", env, "--timesteps", "2048", "--seeds", "1", "--quiet", "--out", str(tmp_path / env))
-        assert r.returncode == 0, r.stderr
-    pendulum, cartpole = (find_agents(tmp_path / env)[0] for env in ("PendulumNoVel-v1", "CartPoleNoVel-v1"))
+    pendulum, cartpole = (find_agents(saved / name)[0] for name in ("ermrl", "cartpole"))
     cartpole_steps = agent_rhythm(cartpole)["steps"]
     assert cartpole_steps < 100
     table, rows = compare_runs({"mixed": [pendulum, cartpole]}, tmp_path / "fft.png", min_steps=100)
@@ -145,8 +147,8 @@ def test_agents_whose_episode_is_too_short_are_left_out_and_named(tmp_path):
     assert table.splitlines()[2].startswith("| mixed | 1 | 200 | ") and table.splitlines()[2].endswith(" | 1 |")
     assert table.splitlines()[-1] == (f"Left out: {cartpole}: the episode lasted {cartpole_steps} steps, too few for a "
                                       "spectrum.")
-    r = ermrl("analyze", "fft", str(tmp_path / "PendulumNoVel-v1"), "--max-steps", "5", "--out", str(tmp_path / "f.png"))
-    assert (r.returncode, r.stderr) == (2, f"ermrl analyze: error: every agent of {tmp_path / 'PendulumNoVel-v1'} ended "
+    r = ermrl("analyze", "fft", str(saved / "ermrl"), "--max-steps", "5", "--out", str(tmp_path / "f.png"))
+    assert (r.returncode, r.stderr) == (2, f"ermrl analyze: error: every agent of {saved / 'ermrl'} ended "
                                            f"its episode in under 8 steps, too few for a spectrum (first: {pendulum}: "
                                            "the episode lasted 5 steps, too few for a spectrum); use agents that "
                                            "survive longer or a larger --max-steps\n")
