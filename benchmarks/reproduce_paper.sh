@@ -145,7 +145,8 @@ step_fft_early() {  # H2, C9 ("very early in the learning process"): Φ* and PPO
   collect locomotion-small-early  # the 100k test phases' summaries and curves
 }
 step_h3() {  # H3: evolved on two of Ant/HalfCheetah/Swimmer, tested on the third (10 × 1M); a model (≈ 1 h on
-  # a host env) resumes from its snapshot across sittings
+  # a host env) resumes from its snapshot across sittings. The studies evolving on Ant get 200k-step trials (the
+  # registry's floor: at 50k PPO does not beat a random agent on Ant)
   run generalization-morphology small "${TEST10[@]}"
 }
 step_humanoid() {  # H3: Humanoid <-> HumanoidStandup, small evolution and test

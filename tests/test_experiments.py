@@ -74,6 +74,27 @@ def test_evolution_refuses_constants_where_ppo_does_not_beat_random(tmp_path):
     assert not (tmp_path / "study.db").exists()
 
 
+def test_an_experiment_study_whose_ppo_baseline_is_weak_is_refused_with_experiment_advice(tmp_path):
+    """In `experiment run` the advice names its own flags (it has no --timesteps); nothing is evolved. The table
+    holds PPO at the study's budget (Ant's floor: 200k-step trials at `small`) below the random agent's -48.05."""
+    from ermrl.experiments.baselines import PPOScore, save_table
+
+    table = tmp_path / "baselines.json"
+    t = load_table(table)
+    for env, mean in (("Ant-v5", -60.0), ("Swimmer-v5", 40.0)):
+        t.add_ppo(env, PPOScore(2, registry.ANT_MIN_TRIAL_TIMESTEPS, 3e-4, mean, 0.0, (mean, mean)), "test")
+    save_table(t, table)
+    out = tmp_path / "run"
+    r = cli("experiment", "run", "generalization-morphology", "--only", "to-halfcheetah", "--baselines", str(table),
+            "--out", str(out), "--no-estimate", "--quiet")
+    assert (r.returncode, r.stderr) == (2, "ermrl experiment: error: on Ant-v5, vanilla PPO (-60) does not beat the "
+                                           "random agent (-48.05) at this budget, so nScore would reward scores below "
+                                           "random; give the study longer trials (a larger --scale) or leave it out "
+                                           "(--only)\n")
+    storage = optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(out / "studies.log")))
+    assert optuna.get_all_study_names(storage) == []
+
+
 def test_select_reevaluates_exactly_the_top_k_and_test_uses_the_winner(tmp_path):
     base = ["--out", str(tmp_path), "--study", "s"]
     r = cli("evolve", "--trials", "4", "--popsize", "4", "--seeds", "1", "--timesteps", "2048", "--fixed-iss", "1.0",
@@ -109,6 +130,8 @@ def test_experiment_list_names_every_experiment_of_the_paper():
     for name in ("partial-observability", "locomotion", "generalization-morphology", "generalization-humanoid",
                  "hp-map", "reservoir-sizes", "observed-units", "reservoir-count"):
         assert f"{name}: " in r.stdout
+    assert ("    studies: to-ant, to-halfcheetah (trials of at least 200k steps), to-swimmer (trials of at least 200k "
+            "steps)\n") in r.stdout
     gen = registry.get("generalization-morphology")
     assert {(s.envs, s.test_envs) for s in gen.studies} == {
         (("HalfCheetah-v5", "Swimmer-v5"), ("Ant-v5",)), (("Ant-v5", "Swimmer-v5"), ("HalfCheetah-v5",)),
@@ -138,9 +161,22 @@ def test_every_experiment_plans_at_every_scale(scale, tmp_path):
         names |= {p.study for p in plans}
         for p in plans:
             assert p.config.trials == registry.SCALES[scale].trials
+            floor = 0 if registry.SCALES[scale].wiring_only else p.spec.min_trial_timesteps
+            assert p.config.train.total_timesteps == max(registry.SCALES[scale].timesteps, floor)
             assert p.config.normalized == (len(p.spec.envs) > 1)
             assert [t.env_id or p.config.env_ids[0] for t in p.tests] == list(p.spec.tested_on)
     assert len(names) == sum(len(e.studies) for e in registry.EXPERIMENTS.values())
+
+
+def test_studies_that_evolve_on_ant_get_trials_long_enough_for_ppo_to_beat_random(tmp_path):
+    """At 50k steps PPO scores below a random agent on Ant-v5, so an nScore evolution with Ant among its envs gets
+    200k-step trials at `small` (and keeps `medium`'s 300k); `smoke` keeps its tiny trials (wiring only)."""
+    steps = {scale: {p.spec.name: p.config.train.total_timesteps
+                     for p in runner.plan(registry.get("generalization-morphology"), registry.get_scale(scale), tmp_path)}
+             for scale in ("smoke", "small", "medium")}
+    assert steps == {"smoke": {"to-ant": 2048, "to-halfcheetah": 2048, "to-swimmer": 2048},
+                     "small": {"to-ant": 50_000, "to-halfcheetah": 200_000, "to-swimmer": 200_000},
+                     "medium": {"to-ant": 300_000, "to-halfcheetah": 300_000, "to-swimmer": 300_000}}
 
 
 def run_smoke(name, tmp_path, only=()):

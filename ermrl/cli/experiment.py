@@ -55,10 +55,16 @@ def run_command(args) -> int:
         for e in registry.EXPERIMENTS.values():
             print(f"{e.name}: {e.title}")
             print(f"    paper: {e.paper}; claims {', '.join(e.claims)}")
-            print(f"    studies: {', '.join(s.name for s in e.studies)}")
+            print(f"    studies: {', '.join(_study_label(s) for s in e.studies)}")
         print("scales: " + "; ".join(f"{s.name} = {s.description}" for s in registry.SCALES.values()))
         return 0
     return _run(args)
+
+
+def _study_label(spec) -> str:
+    """A study's name, with the floor of its trial budget where it has one."""
+    floor = spec.min_trial_timesteps
+    return f"{spec.name} (trials of at least {floor // 1000}k steps)" if floor else spec.name
 
 
 def _run(args) -> int:

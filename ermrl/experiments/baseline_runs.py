@@ -50,25 +50,28 @@ def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path
     return out
 
 
-def check_informative(baselines, normalization: str) -> None:
+EVOLVE_ADVICE = "use a larger --timesteps, drop the env, or pass --allow-weak-baselines to go on anyway"
+
+
+def check_informative(baselines, normalization: str, advice: str = EVOLVE_ADVICE) -> None:
     """Refuses constants where vanilla PPO does not beat the random agent: there nScore's denominator is zero
     or negative, so maximizing it would reward scores *below* random (Ant-v5 at 50k steps is such a case:
-    surviving longer costs more control cost than a random agent's early falls)."""
+    surviving longer costs more control cost than a random agent's early falls). ``advice`` ends the message."""
     weak = [b for b in baselines
             if b.ppo <= (b.random_return if normalization == "episodic" else b.random_step_reward)]
     if weak:
         b = weak[0]
         rnd = b.random_return if normalization == "episodic" else b.random_step_reward
         raise ConfigError(f"on {b.env_id}, vanilla PPO ({b.ppo:.4g}) does not beat the random agent ({rnd:.4g}) at this "
-                          "budget, so nScore would reward scores below random; use a larger --timesteps, drop the env, "
-                          "or pass --allow-weak-baselines to go on anyway")
+                          f"budget, so nScore would reward scores below random; {advice}")
 
 
 def with_baselines(config, table_path: Path | None, storage_url: str, study_name: str,
-                   log: Callable[[str], None], progress: Callable | None = None, allow_weak: bool = False):
+                   log: Callable[[str], None], progress: Callable | None = None, allow_weak: bool = False,
+                   advice: str = EVOLVE_ADVICE):
     """``config`` (an EvolveConfig over several envs) with its constants: the stored ones when the study exists
     already (a resumed study keeps the constants it started with), else from the table, computed if missing.
-    Unless ``allow_weak``, refuses constants where PPO does not beat the random agent."""
+    Unless ``allow_weak``, refuses constants where PPO does not beat the random agent (``advice``: what to do)."""
     from ermrl import storage
     from ermrl.evolution.study import ATTR, load_study
 
@@ -82,5 +85,5 @@ def with_baselines(config, table_path: Path | None, storage_url: str, study_name
                    table_path, log, progress, config.train.backend, config.train.env_workers)
     constants = tuple(found[e] for e in config.env_ids)
     if not allow_weak:
-        check_informative(constants, config.normalization)
+        check_informative(constants, config.normalization, advice)
     return dataclasses.replace(config, baselines=constants)

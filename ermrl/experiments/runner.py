@@ -84,6 +84,10 @@ def experiment_dir(experiment: Experiment, scale: Scale, root: Path = Path("runs
     return root / f"{experiment.name}-{scale.name}"
 
 
+WEAK_ADVICE = "give the study longer trials (a larger --scale) or leave it out (--only)"
+"""What to do when a study's PPO baseline does not beat a random agent at its trial budget."""
+
+
 def default_storage(folder: Path) -> str:
     """A journal file: text, append-only, safe to kill at any point, and small enough to commit."""
     return f"journal:{folder / 'studies.log'}"
@@ -97,7 +101,8 @@ def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "aut
         agent = AgentConfig(reservoirs=spec.reservoirs, spec=ReservoirSpec(units=spec.units),
                             observed_units=spec.observed_units)
         ppo = dataclasses.replace(SB3_DEFAULTS, learning_rate=spec.evolve_lr)
-        train = TrainConfig(env_id=spec.envs[0], total_timesteps=scale.timesteps, agent=agent, ppo=ppo,
+        trial_steps = scale.timesteps if scale.wiring_only else max(scale.timesteps, spec.min_trial_timesteps)
+        train = TrainConfig(env_id=spec.envs[0], total_timesteps=trial_steps, agent=agent, ppo=ppo,
                             backend=backend, env_workers=env_workers)
         config = EvolveConfig(train=train, space=SearchSpace(spec.reservoirs, fixed_iss=spec.fixed_iss),
                               trials=scale.trials, seeds=scale.seeds, popsize=scale.popsize,
@@ -220,7 +225,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
         if config.normalized:
             # smoke budgets are too short for PPO to beat a random agent: it checks the wiring, not the science
             config = baseline_runs.with_baselines(config, baselines_table, url, p.study, log, progress,
-                                                  allow_weak=scale.name == "smoke")
+                                                  allow_weak=scale.wiring_only, advice=WEAK_ADVICE)
         study = open_study(url, p.study, make_sampler(config.sampler, config.generation_size, config.sampler_seed),
                            storage.encode_study_record(config))
         config = dataclasses.replace(config, baselines=storage.decode_study_record(study.user_attrs[ATTR]).baselines)
