@@ -56,7 +56,7 @@ EVOLVE_ADVICE = "use a larger --timesteps, drop the env, or pass --allow-weak-ba
 def check_informative(baselines, normalization: str, advice: str = EVOLVE_ADVICE) -> None:
     """Refuses constants where vanilla PPO does not beat the random agent: there nScore's denominator is zero
     or negative, so maximizing it would reward scores *below* random (Ant-v5 at 50k steps is such a case:
-    surviving longer costs more control cost than a random agent's early falls). ``advice`` ends the message."""
+    see ``registry.ANT_MIN_TRIAL_TIMESTEPS``). ``advice`` ends the message."""
     weak = [b for b in baselines
             if b.ppo <= (b.random_return if normalization == "episodic" else b.random_step_reward)]
     if weak:
