@@ -103,3 +103,27 @@ def test_an_estimate_on_a_busy_machine_says_it_may_be_several_times_too_short():
                                            "times longer")
     assert busy_note(load=1.5, cores=2) is None and busy_note(load=0.2, cores=2) is None
     assert busy_note(load=2.1, cores=4) is None
+
+
+def test_the_estimate_counts_the_normalization_baselines_a_new_study_over_several_envs_trains_first(tmp_path):
+    """A study whose fitness is the mean nScore over several envs first trains vanilla PPO on each env at the
+    evolution's budget where the baselines table lacks it (``baseline_runs.ensure``): the estimate counts it once
+    per env and budget, not when the table has it, and not for a study that exists already (it keeps its
+    constants). JAX envs here, so that the rate is the nominal one."""
+    from ermrl.experiments import baselines
+
+    envs = ("CartPoleNoVel-v1", "PendulumNoVel-v1")
+    experiment = registry.Experiment("pair", "two JAX envs", "test", (), (
+        registry.StudySpec("a", envs), registry.StudySpec("b", envs)))
+    plans = runner.plan(experiment, registry.get_scale("small"), tmp_path)
+    c = plans[0].config
+    assert c.normalized and c.env_ids == envs
+    per_env = c.seeds * c.train.total_timesteps / runner.JAX_RATE
+    table = baselines.load_table(tmp_path / "baselines.json")  # the shipped table only
+    assert all(table.ppo(e, c.train.total_timesteps, c.seeds, 3e-4) is None for e in envs)
+    without = runner.estimate_seconds(plans)
+    assert runner.estimate_seconds(plans, table=table) == pytest.approx(without + 2 * per_env)  # shared by a and b
+    table.add_ppo(envs[0], baselines.PPOScore(c.seeds, c.train.total_timesteps, 3e-4, 100.0, 1.0, (99.0, 101.0)), "x")
+    assert runner.estimate_seconds(plans, table=table) == pytest.approx(without + per_env)
+    started = {p.study: 0 for p in plans}
+    assert runner.estimate_seconds(plans, started, table=table) == pytest.approx(runner.estimate_seconds(plans, started))

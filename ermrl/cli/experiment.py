@@ -92,10 +92,12 @@ def _run(args) -> int:
         storage.check_folder(args.baseline_store, "--baseline-store")
     plans = [p for p in runner.plan(experiment, scale, folder, args.backend, args.env_workers, budget)
              if not args.only or p.spec.name in args.only]
+    table = None
     if any(p.config.normalized for p in plans):  # a damaged table fails now, not after the first studies
         from ermrl.experiments import baselines
 
-        baselines.load_table(storage.check_file(args.baselines or baselines.default_table(), "--baselines", "baselines.json"))
+        table = baselines.load_table(storage.check_file(args.baselines or baselines.default_table(), "--baselines",
+                                                        "baselines.json"))
     for env_id in sorted({e for p in plans for e in p.config.env_ids + tuple(t.env_id for t in p.tests if t.env_id)}):
         envs.describe(env_id, args.backend)  # every env exists and its simulator is installed, before any work
     url = args.storage or runner.default_storage(folder)
@@ -115,7 +117,8 @@ def _run(args) -> int:
           f"(storage {shown_url(url)})")
     if not args.no_estimate:
         finished = sum(len(p.tests) - len(left.get(p.study, p.tests)) for p in plans)
-        seconds = runner.estimate_seconds(plans, done, left, args.baseline_store, budget.agents_per_run, unselected)
+        seconds = runner.estimate_seconds(plans, done, left, args.baseline_store, budget.agents_per_run, unselected,
+                                           table)
         print(f"estimated time: {seconds / 60:.0f} min (rough: nominal throughput, "
               f"{sum(done.values())} trials and {finished} test phases already done)")
         if seconds >= 60 and (note := busy_note()):

@@ -161,20 +161,33 @@ def tests_left(p: StudyPlan, study) -> tuple[TestConfig, ...]:
 
 def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
                      left: dict[str, tuple[TestConfig, ...]] | None = None, store: Path | None = None,
-                     agents_per_run: int | None = None, unselected: set[str] | None = None) -> float:
+                     agents_per_run: int | None = None, unselected: set[str] | None = None,
+                     table=None) -> float:
     """The experiment's remaining time, from nominal rates, the trials already completed (``done``: study name ->
     count), the studies whose selection is still to run (``unselected``: names, see :func:`selection_left`;
     default those with trials left) and the test phases still to run (``left``: study name -> :func:`tests_left`;
     default all). With a baseline ``store`` (``--baseline-store``), a PPO baseline already there costs nothing, and
-    one that several test phases share is counted once; without, every test phase trains its own."""
+    one that several test phases share is counted once; without, every test phase trains its own. With the
+    baselines ``table`` (a BaselineTable), a study over several envs not yet started (absent from ``done``) also
+    pays for the vanilla PPO fitness its normalization needs where the table lacks it, once per env and budget
+    (the random agent's 100 episodes are not counted: seconds)."""
     done, left = done or {}, left or {}
     if unselected is None:
         unselected = {p.study for p in plans if done.get(p.study, 0) < p.config.trials}
     rates: dict[str, float] = {}
     total = 0.0
     counted: set[Path] = set()
+    normalizing: set[tuple] = set()
     for p in plans:
         c = p.config
+        if table is not None and c.normalized and p.study not in done:
+            lr = c.train.ppo.learning_rate
+            for env_id in c.env_ids:
+                key = (env_id, c.train.total_timesteps, c.seeds, lr)
+                if key not in normalizing and table.ppo(*key) is None:
+                    normalizing.add(key)
+                    rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
+                    total += c.seeds * c.train.total_timesteps / rate
         extra = reservoir_seconds(c.train.agent)  # ER-MRL agents only; PPO baselines have no reservoir
         remaining = max(c.trials - done.get(p.study, 0), 0) * c.seeds
         if p.study in unselected:
