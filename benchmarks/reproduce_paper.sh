@@ -259,6 +259,19 @@ step_seed_schedule() {  # C2's likely cause, the evolution's fixed seeds: CartPo
     }
   done
 }
+step_seed_schedule_paper() {  # C2 / the CartPole target: the paper-scale CartPoleNoVel study (900 trials × 3 seeds ×
+  # 300k) with new seeds each generation, the fix for the fixed seeds' overfitting that the 900-trial study showed
+  # (≈ 2 h alone, resumable); then selected (top 5 × 5 fresh seeds) and tested 10 × 1M
+  local d=docs/data/seed-schedule r=runs/seed-schedule/generation-900 study=cartpole-1res-generation-900
+  "$E" evolve --env CartPoleNoVel-v1 --trials 900 --seeds 3 --timesteps 300000 --fixed-iss 1.0 \
+      --seed-schedule generation --study "$study" --storage "$d/studies.log" --out "$r" --quiet
+  "$E" select --study "$study" --storage "$d/studies.log" --out "$r" --top 5 --seeds 5 --quiet
+  [ -f "$d/generation-900/test/summary.json" ] || {
+    "$E" test --study "$study" --storage "$d/studies.log" --out "$r" --seeds 10 --timesteps 1000000 --quiet
+    mkdir -p "$d/generation-900/test"
+    cp "$r"/test/{summary.json,summary.csv,curves.csv,test_config.json,test_phase.png} "$d/generation-900/test/"
+  }
+}
 step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time around its defaults (connectivities
   # 0.1, bias ±1 on 10% of the units), with the default Φ (sr 0.95, lr 0.5, iss 1) on CartPoleNoVel and
   # PendulumNoVel, 10 seeds (1000-1009) × 300k each (the evolution's budget); a stopped run resumes from its snapshot
@@ -284,9 +297,9 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule observed_units sizes other_hps)
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule observed_units sizes other_hps" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"
