@@ -4,20 +4,21 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 PIP := $(BIN)/python -m pip --disable-pip-version-check -q
 
-.PHONY: demo test system-deps test-slow test-reference parity reference bench clean
+.PHONY: demo test system-deps test-slow test-reference parity reference bench clean lock
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -U pip
 
 # One stamp per set of extras, so that `make test` after `make demo` only adds what is missing.
-$(VENV)/.installed-base: pyproject.toml | $(BIN)/python
-	$(PIP) install -e .
+# constraints.txt pins every package to the versions behind the committed results (see its header).
+$(VENV)/.installed-base: pyproject.toml constraints.txt | $(BIN)/python
+	$(PIP) install -c constraints.txt -e .
 	touch $@
 
 # The tests run every listed env id, so they take the box2d and mujoco extras too, and video for `ermrl video`.
-$(VENV)/.installed-test: pyproject.toml | $(BIN)/python
-	$(PIP) install -e '.[test,box2d,mujoco,video,workers,dashboard]'
+$(VENV)/.installed-test: pyproject.toml constraints.txt | $(BIN)/python
+	$(PIP) install -c constraints.txt -e '.[test,box2d,mujoco,video,workers,dashboard]'
 	touch $@
 
 # MuJoCo renders videos headless through OSMesa (Debian's libosmesa6; about 130 MB installed with LLVM). As root
@@ -77,6 +78,12 @@ test-slow: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -q -m slow
 
 reference: $(REF_VENV)/.installed
+
+# Rewrites constraints.txt from the test venv (its header kept): run it in a venv that holds nothing but this
+# install, and commit it together with the reruns that the new versions call for.
+lock: $(VENV)/.installed-test
+	{ grep '^#' constraints.txt; $(PIP) freeze --exclude-editable; } > constraints.txt.new
+	mv constraints.txt.new constraints.txt
 
 # Tests that need torch and SB3: the wrapper under SB3, PPO parity with SB3 and PPO-LSTM parity with sb3-contrib
 # RecurrentPPO (about 30 min on 2 cores).

@@ -241,11 +241,15 @@ class TrainRun:
 
 
 def write_train_run(out: Path, config, results, label: str, effective: dict | None = None) -> TrainRun:
-    """Writes config.json (the effective config), episodes.csv, curves.csv and summary.json into ``out``."""
+    """Writes config.json (the effective config and the software versions, :mod:`ermrl.provenance`),
+    episodes.csv, curves.csv and summary.json into ``out``."""
     run = TrainRun(Path(out))
     population = {"seeds": results.seeds.tolist(), "phi": {k: v.tolist() for k, v in results.phi.items()},
                   "learning_rate": results.learning_rate.tolist()}
-    write_json(run.config, {"train": to_dict(config), "population": population, **({"options": effective} if effective else {})})
+    from ermrl.provenance import software
+
+    write_json(run.config, {"train": to_dict(config), "population": population,
+                            **({"options": effective} if effective else {}), "software": software()})
     write_episodes_csv(run.episodes, results, label)
     write_curves_csv(run.curves, {label: results.curves()}, {label: results.seeds})
     write_json(run.summary, results_summary(results))

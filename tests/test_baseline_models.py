@@ -3,6 +3,7 @@ one trained, and gets the results it would have trained, bit for bit. Real train
 
 import json
 
+import jax
 import numpy as np
 import optuna
 
@@ -66,3 +67,16 @@ def test_a_second_test_phase_reuses_the_stored_ppo_baselines_and_retrains_a_dama
             a, b = (tmp_path / r / "test" / "agents" / model / f"seed{seed}.npz" for r in ("a", "b"))
             with np.load(a) as x, np.load(b) as y:
                 assert x.files == y.files and all(np.array_equal(x[k], y[k]) for k in x.files), (model, seed)
+
+    # a baseline trained under other versions is still reused, and the log says which versions differ
+    with np.load(full) as data:
+        flat = {k: data[k] for k in data.files}
+    meta = json.loads(str(flat.pop("meta")))
+    assert meta["software"]["jax"] == jax.__version__
+    meta["software"]["jax"] = "0.4.0"
+    with open(full, "wb") as f:
+        np.savez(f, meta=np.array(json.dumps(meta)), **flat)
+    assert main([*args[:6], str(tmp_path / "c"), *args[7:]]) == 0
+    assert (f"reused PPO (full observation) from the baseline store ({full}); it was trained with other versions "
+            f"(jax 0.4.0 → {jax.__version__}), so it is not bit for bit what this machine would train\n"
+            in capsys.readouterr().out)

@@ -4,6 +4,8 @@ import json
 import subprocess
 import sys
 
+import jax
+import mujoco
 import pytest
 
 
@@ -22,6 +24,7 @@ def test_train_writes_a_run_folder(tmp_path):
     assert config["train"]["env_id"] == "CartPoleNoVel-v1" and config["population"]["seeds"] == [0, 1]
     assert config["train"]["ppo"]["n_steps"] == 2048
     assert config["population"]["phi"]["sr"] == [[pytest.approx(0.95)], [pytest.approx(0.95)]]
+    assert config["software"]["jax"] == jax.__version__ and config["software"]["mujoco"] == mujoco.__version__
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["fitness"]) == 2 and summary["episodes"][0] > 10
     assert (out / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"

@@ -5,6 +5,7 @@ import json
 import subprocess
 import sys
 
+import jax
 import numpy as np
 import optuna
 import pytest
@@ -112,6 +113,8 @@ def test_select_reevaluates_exactly_the_top_k_and_test_uses_the_winner(tmp_path)
     assert r.returncode == 0, r.stderr
     rows = json.loads((tmp_path / "test" / "summary.json").read_text())
     assert rows[0]["phi_trial"] == selection["winner"] and "selected by `ermrl select`" in rows[0]["phi_choice"]
+    assert selection["software"] == json.loads((tmp_path / "test" / "test_config.json").read_text())["software"]
+    assert selection["software"]["jax"] == jax.__version__ and study.user_attrs["software"]["jax"] == jax.__version__
 
 
 def test_a_diverged_seed_is_counted_not_dropped():

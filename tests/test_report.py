@@ -76,6 +76,11 @@ def test_report_contents(tmp_path, k):
     # failure reasons are escaped
     assert "NaN loss &lt;in PPO update&gt;" in doc and "<in PPO update>" not in doc
     assert "Test phase" not in doc and "no completed trial yet" not in doc
+    assert "Software" not in doc  # a study from before the versions were recorded
+    study.set_user_attr("software", {"python": "3.11.7", "cpu": "x86_64 AVX2", "jax": "0.10.2"})
+    doc = write_report(study, tmp_path).read_text()
+    software = doc[doc.index("<summary>Software (the study's first run)</summary>"):]
+    assert "<td>cpu</td><td>x86_64 AVX2</td>" in software and "<td>jax</td><td>0.10.2</td>" in software
 
 
 def test_report_test_phase(tmp_path):

@@ -253,7 +253,7 @@ def analysis_section(run_dir: Path, out_dir: Path) -> list[str]:
 def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | None = None) -> Path:
     """Writes ``<run_dir>/report.html`` (or ``out``), with fitness_over_trials.png and hp_map.png beside it in
     run_dir. Results come first (best and selected Φ, test phases with their statistics, the analyses found in
-    run_dir), then the evolution's figures, failed trials, and the configuration (collapsed)."""
+    run_dir), then the evolution's figures, failed trials, the configuration and the software versions (collapsed)."""
     run_dir = Path(run_dir)
     out = Path(out) if out is not None else run_dir / "report.html"
     cfg = study.user_attrs.get("ermrl", {})
@@ -305,5 +305,9 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
             [t.number, t.user_attrs.get("generation", ""), str(t.user_attrs.get("failure", ""))] for t in bad])]
     parts += ["<details><summary>Configuration</summary>",
               _table(["key", "value"], [[key, v] for key, v in _flatten(cfg)]), "</details>"]
+    software = study.user_attrs.get("software")
+    if software:  # ermrl.provenance: what a seed-for-seed rerun needs
+        parts += ["<details><summary>Software (the study's first run)</summary>",
+                  _table(["package", "version"], [[key, v] for key, v in software.items()]), "</details>"]
     storage.write_text(out, page(title, parts))
     return out

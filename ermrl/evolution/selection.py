@@ -16,6 +16,7 @@ import numpy as np
 import optuna
 from optuna.trial import FrozenTrial, TrialState
 
+from ermrl import provenance
 from ermrl.agent import Phi
 from ermrl.errors import ConfigError
 from ermrl.evolution.config import EvolveConfig
@@ -43,6 +44,8 @@ class Selection:
     winner: int
     """Trial number with the best re-evaluated fitness."""
     date: str
+    software: dict | None = None
+    """The versions the re-evaluations ran with (:mod:`ermrl.provenance`); None in selections made before."""
 
 
 def ranked_trials(study: optuna.Study) -> list[FrozenTrial]:
@@ -109,6 +112,7 @@ def select(study: optuna.Study, config: EvolveConfig, top: int, seeds: int,
         trials=tuple(t.number for t in trials), seeds=tuple(seed_list),
         evolution_values=tuple(float(t.value) for t in trials), values=tuple(values),
         per_seed=tuple(tuple(None if not np.isfinite(v) else float(v) for v in row) for row in s.per_seed),
-        winner=trials[int(np.argmax(finite))].number, date=datetime.datetime.now().isoformat(timespec="seconds"))
+        winner=trials[int(np.argmax(finite))].number, date=datetime.datetime.now().isoformat(timespec="seconds"),
+        software=provenance.software())
     study.set_user_attr(ATTR, dataclasses.asdict(selection))
     return selection

@@ -10,12 +10,14 @@ from __future__ import annotations
 import importlib.util
 import json
 import random
+import sys
 import time
 import warnings
 from pathlib import Path
 
 import optuna
 
+from ermrl import provenance
 from ermrl.errors import ConfigError
 from ermrl.evolution.heartbeat import GRACE_PERIOD_S, INTERVAL_S
 
@@ -23,6 +25,8 @@ SAMPLERS = ("cmaes", "random", "tpe")
 SCHEMA_RETRIES = 5
 ATTR = "ermrl"
 """The study user attribute that holds the evolution's config."""
+SOFTWARE_ATTR = "software"
+"""The study user attribute that holds the software versions it started with (:mod:`ermrl.provenance`)."""
 
 
 def default_storage(run_dir: Path) -> str:
@@ -149,7 +153,21 @@ def open_study(storage_url: str, name: str, sampler, record: dict | None,
         if differs:
             raise ConfigError(f"study {name!r} already exists with another config; rerun with the same flags to "
                               "resume it, or pick a new --study name")
+        _record_software(study, name)
     return study
+
+
+def _record_software(study: optuna.Study, name: str) -> None:
+    """Keeps the software versions of the first run that opened the study (:mod:`ermrl.provenance`; studies
+    older than this record get the versions of their next run) in its user attribute
+    ``software``; a resumption under other versions warns on stderr, since its trials are then not what one
+    run would have computed (other random streams or rounding), though still valid samples of the same method."""
+    recorded = study.user_attrs.get(SOFTWARE_ATTR)
+    if recorded is None:
+        study.set_user_attr(SOFTWARE_ATTR, provenance.software())
+    elif changed := provenance.differences(recorded):
+        print(f"warning: study {name!r} was started with other versions ({', '.join(changed)}); its new trials "
+              "will not match what the first versions would compute, seed for seed", file=sys.stderr)
 
 
 def load_study(storage_url: str, name: str) -> optuna.Study:

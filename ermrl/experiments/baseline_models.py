@@ -2,7 +2,8 @@
 
 A test phase's PPO baselines (vanilla PPO on the same and on the full observation, PPO-LSTM) do not depend on
 Φ*: two test phases on one env with the same seeds, budget, learning rate and PPO settings train the same
-models, to the last bit. The paper's experiments hold such pairs: the H2 test on Ant and the H3 test of the study
+models, to the last bit, under the same versions of JAX, MuJoCo and the rest (:mod:`ermrl.provenance`; each file
+records them, and a reuse under other versions says so). The paper's experiments hold such pairs: the H2 test on Ant and the H3 test of the study
 evolved on HalfCheetah and Swimmer train the same PPO on Ant (10 seeds × 1M steps, ≈ 1.5 h of host steps here),
 as do the test phases of one env at several reservoir counts or sizes. A store keeps each trained baseline once,
 as ``STORE/ENV/JOB-DIGEST.npz`` in the format of :mod:`ermrl.experiments.checkpoints`, where DIGEST hashes the

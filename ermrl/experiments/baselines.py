@@ -110,8 +110,10 @@ def ppo_fitness(env_id: str, timesteps: int, seeds: int, learning_rate: float = 
 
 def _provenance(command: str) -> dict:
     import ermrl
+    from ermrl.provenance import software
 
-    return {"command": command, "date": datetime.date.today().isoformat(), "ermrl_version": ermrl.__version__}
+    return {"command": command, "date": datetime.date.today().isoformat(), "ermrl_version": ermrl.__version__,
+            "software": software()}
 
 
 @dataclasses.dataclass

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ermrl import agent_files, storage
+from ermrl import agent_files, provenance, storage
 from ermrl.envs.spaces import EnvInfo
 from ermrl.training.results import Episodes, Policies, Results
 
@@ -79,7 +79,8 @@ def save_job(folder: Path, name: str, identity: dict, results: Results) -> Path:
             "compile_s": float(results.compile_s), "train_s": float(results.train_s),
             "env": None if results.policies is None else storage.to_dict(results.policies.env),
             "log_std": results.policies is not None and results.policies.log_std is not None,
-            "phi": list(results.phi), "metrics": list(results.metrics)}  # in order: agent files list Φ so
+            "phi": list(results.phi), "metrics": list(results.metrics),  # in order: agent files list Φ so
+            "software": provenance.software()}
     episodes = results.episodes
     arrays = {"seeds": results.seeds, "learning_rate": results.learning_rate, "finite": results.finite,
               "episode_counts": np.array([len(e.ret) for e in episodes], np.int64),
@@ -126,6 +127,13 @@ def load_job(folder: Path, name: str, identity: dict) -> Results | None:
     except Exception:  # zipfile.BadZipFile, EOFError, OSError, KeyError, ValueError, ConfigError: train it again
         return None
     return results if kept == plain(identity) else None
+
+
+def software_of(path: Path) -> dict | None:
+    """The software versions (:mod:`ermrl.provenance`) a file written by :func:`save_job` was trained with;
+    None for a file written before they were recorded."""
+    with np.load(path, allow_pickle=False) as data:
+        return json.loads(str(data["meta"])).get("software")
 
 
 def _results(meta: dict, flat: dict[str, np.ndarray]) -> Results:

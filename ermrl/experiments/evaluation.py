@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 import optuna
 
-from ermrl import agent_files, envs, storage
+from ermrl import agent_files, envs, provenance, storage
 from ermrl.agent import AgentConfig, Phi
 from ermrl.analysis import statistics
 from ermrl.envs import masking
@@ -212,7 +212,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
             agent_files.write_agents(stage / agent_files.AGENTS_DIR / folder, train_config, part, label)
         storage.write_curves_csv(stage / "curves.csv", curves, seed_map)
         storage.write_json(stage / "test_config.json", {**dataclasses.asdict(test), "phi_trial": trial.number,
-                                                        "phi_choice": how, "evolved_on": evolved_on})
+                                                        "phi_choice": how, "evolved_on": evolved_on,
+                                                        "software": provenance.software()})
         learning_curves(curves, title, stage / "test_phase", ("png", "svg"))
         storage.write_test_summary(stage, rows)
     checkpoints.discard(out)
@@ -277,7 +278,10 @@ def _trained(partial: Path, name: str, labels: list[str], train_config, populati
         whole, path = baseline_models.load(store, _shared_identity(identity, size, n))
         if whole is not None:
             if log:
-                log(f"reused {', '.join(labels)} from the baseline store ({path})")
+                changed = provenance.differences(checkpoints.software_of(path) or {})
+                log(f"reused {', '.join(labels)} from the baseline store ({path})"
+                    + (f"; it was trained with other versions ({', '.join(changed)}), so it is not bit for bit what "
+                       "this machine would train" if changed else ""))
             return whole
     if whole is None:
         whole = _train(partial, name, labels, train_config, population, size, shown, progress, log,
