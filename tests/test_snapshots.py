@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ermrl import provenance
 from ermrl.agent import AgentConfig, Phi
 from ermrl.envs.host_groups import EnvGroup, ReplayMismatch
 from ermrl.ppo.config import SB3_DEFAULTS
@@ -118,6 +119,17 @@ def test_a_snapshot_holds_no_reservoir_weights_and_an_older_one_with_them_still_
     lines = []
     assert_same_results(trainer.run(population, snapshot=path, log=lines.append), unbroken)
     assert lines == [f"resumed from {path} at iteration 3 of 6"]
+
+    # a snapshot records the versions and CPU it was computed under; a resume under others says so
+    with pytest.raises(Stop):
+        trainer.run(population, stop_after(4), snapshot=path, snapshot_every_s=0)
+    snap = snapshots.read(path, ident)
+    assert snap.software == provenance.software()
+    snapshots.write(path, ident, snap._replace(software={**snap.software, "cpu": "riscv64"}))
+    lines = []
+    trainer.run(population, snapshot=path, log=lines.append)
+    assert lines == [f"resumed from {path} at iteration 3 of 6; it was written under other versions (cpu riscv64 "
+                     f"→ {provenance.cpu()}), so the rest of the run is not bit for bit what they would compute"]
 
 
 def test_a_snapshot_of_another_population_is_not_used(tmp_path):

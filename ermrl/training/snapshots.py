@@ -12,7 +12,9 @@ minutes :meth:`ermrl.training.Trainer.run` writes, atomically, one file holding:
   and the compile and train times.
 
 A rerun with the same identity (TrainConfig without the env workers, population, device count) continues from
-the file and ends with the same Results, to the last bit, as a run that never stopped (tests/test_snapshots.py).
+the file and ends with the same Results, to the last bit, as a run that never stopped (tests/test_snapshots.py),
+when it runs under the same versions and CPU as the run that wrote it (the file records them; a resume under others
+says so).
 A file for another identity, of another format, or damaged is ignored and the run starts over.
 """
 
@@ -24,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ermrl import storage
+from ermrl import provenance, storage
 from ermrl.envs.host_groups import EpisodeRecord
 
 FORMAT = "ermrl-run-snapshot"
@@ -48,6 +50,9 @@ class Snapshot(NamedTuple):
     compile_s: float
     train_s: float
     """Train time before the stop (the resumed run adds its own)."""
+    software: dict | None = None
+    """The versions and CPU it was computed under (:mod:`ermrl.provenance`); None when writing: this machine's, and
+    when read from a file written before they were recorded."""
 
 
 def identity(train_config, population, n_devices: int) -> dict:
@@ -70,7 +75,8 @@ def write(path: Path, ident: dict, snap: Snapshot) -> None:
             "n_leaves": len(snap.leaves), "finished_shape": list(rets.shape[1:]),
             "finished_dtypes": [str(rets.dtype), str(lengths.dtype)], "metrics": list(snap.metrics[0]),
             "compile_s": snap.compile_s, "train_s": snap.train_s,
-            "env_starts": None if snap.envs is None else [r.start for r in snap.envs]}
+            "env_starts": None if snap.envs is None else [r.start for r in snap.envs],
+            "software": snap.software or provenance.software()}
     arrays = {f"leaf/{i}": leaf for i, leaf in enumerate(snap.leaves)}
     arrays.update({"finished/where": np.stack(where).astype(np.int32), "finished/ret": rets[where],
                    "finished/length": lengths[where], "finite": snap.finite})
@@ -122,4 +128,5 @@ def _snapshot(meta: dict, flat: dict[str, np.ndarray]) -> Snapshot:
         envs = [EpisodeRecord(start, actions[a:b], obs)
                 for start, a, b, obs in zip(meta["env_starts"], bounds[:-1], bounds[1:], flat["envs/obs"])]
     return Snapshot(n_it, [flat[f"leaf/{i}"] for i in range(meta["n_leaves"])], envs,
-                    list(zip(rets, lengths)), metrics, flat["finite"], meta["compile_s"], meta["train_s"])
+                    list(zip(rets, lengths)), metrics, flat["finite"], meta["compile_s"], meta["train_s"],
+                    meta.get("software"))

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ermrl import envs
+from ermrl import envs, provenance
 from ermrl.agent import Agent, AgentConfig, Phi, Reservoirs
 from ermrl.errors import ConfigError
 from ermrl.training.host_loop import HostIteration
@@ -338,7 +338,10 @@ class Trainer:
                 else:
                     state = restored
                     if log:
-                        log(f"resumed from {snapshot} at iteration {resumed.iteration} of {self.n_iterations}")
+                        changed = provenance.differences(resumed.software or {})
+                        log(f"resumed from {snapshot} at iteration {resumed.iteration} of {self.n_iterations}"
+                            + (f"; it was written under other versions ({', '.join(changed)}), so the rest of the "
+                               "run is not bit for bit what they would compute" if changed else ""))
             compiled = self.compiled(state)
             compile_s = time.perf_counter() - t0 if resumed is None else resumed.compile_s
             saver = None if snapshot is None else _Saver(Path(snapshot), ident, snapshot_every_s)
