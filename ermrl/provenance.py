@@ -27,7 +27,6 @@ from pathlib import Path
 PACKAGES = ("ermrl", "jax", "jaxlib", "numpy", "gymnasium", "mujoco", "box2d", "gymnax", "optax", "flax",
             "optuna", "cmaes")
 
-
 # The widest x86 vector extension XLA may compile for, widest first, by its /proc/cpuinfo flag.
 ISA_FLAGS = (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"), ("sse4_2", "SSE4.2"))
 

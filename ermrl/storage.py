@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ermrl import provenance
 from ermrl.atomic import atomic_path, check_file, check_folder, repair_journal, staged_folder  # noqa: F401
 from ermrl.errors import ConfigError
 
@@ -246,10 +247,8 @@ def write_train_run(out: Path, config, results, label: str, effective: dict | No
     run = TrainRun(Path(out))
     population = {"seeds": results.seeds.tolist(), "phi": {k: v.tolist() for k, v in results.phi.items()},
                   "learning_rate": results.learning_rate.tolist()}
-    from ermrl.provenance import software
-
     write_json(run.config, {"train": to_dict(config), "population": population,
-                            **({"options": effective} if effective else {}), "software": software()})
+                            **({"options": effective} if effective else {}), "software": provenance.software()})
     write_episodes_csv(run.episodes, results, label)
     write_curves_csv(run.curves, {label: results.curves()}, {label: results.seeds})
     write_json(run.summary, results_summary(results))
