@@ -127,6 +127,9 @@ step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study'
 step_h2() {  # H2: Ant, HalfCheetah, Swimmer with 2 reservoirs, small evolution, test 10 × 1M against PPO
   run locomotion small --only ant-2res halfcheetah-2res swimmer-2res "${TEST10[@]}"
 }
+step_c8() {  # C8: Hopper and Walker2d, where the paper saw no gain: small evolution, test 10 × 1M against PPO
+  run locomotion small --only hopper-2res walker2d-2res "${TEST10[@]}"
+}
 step_fft() {  # H2: the rhythm of the test phases' ER-MRL and PPO agents
   for s in ant halfcheetah swimmer; do
     local t=runs/experiments/locomotion-small/$s-2res/test/agents
@@ -297,9 +300,9 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 c8 fft fft_early h3 humanoid hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 fft fft_early h3 humanoid hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 c8 fft fft_early h3 humanoid hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"
