@@ -105,6 +105,13 @@ step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution,
   run partial-observability small --only lunarlander-2res --test-seeds 10 --test-timesteps 3000000 --test-lrs 1e-4 \
       --env-workers 0
 }
+step_lunarlander_medium() {  # H1, the LunarLander target's next attempt: the paper's per-trial budget (60 trials
+  # × 3 seeds × 300k; `small`'s 50k-step trials score near a random agent), then selection (top 5 × 5 seeds) and
+  # the test phase 10 × 3M at lr 1e-4 (PPO's baselines are the `lunarlander` step's, from the store). ≈ 4 h of
+  # evolution and ≈ 2.7 h of test here: it resumes across sittings (whole CMA-ES generations; the test model
+  # from its snapshot)
+  run partial-observability medium --only lunarlander-2res --test-lrs 1e-4 --env-workers 0
+}
 step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study's small evolution and selection
   # with one reservoir, its Φ* trained on the test seeds (1000-1009, 3M steps, lr 1e-4; ≈ 2 h here, resumes from
   # docs/data/c3-lunarlander/ermrl-1res.snapshot), ER-MRL only (the PPO baselines are the 2-reservoir test
@@ -151,6 +158,16 @@ step_h3() {  # H3: evolved on two of Ant/HalfCheetah/Swimmer, tested on the thir
   # a host env) resumes from its snapshot across sittings. The studies evolving on Ant get 200k-step trials (the
   # registry's floor: at 50k PPO does not beat a random agent on Ant)
   run generalization-morphology small "${TEST10[@]}"
+}
+step_c16() {  # C16: K = 3 (and K = 1) reservoirs in the to-ant group (evolved on HalfCheetah and Swimmer, tested on
+  # Ant 10 × 1M), against H3's K = 2 (its to-ant study is the same spec with 2 reservoirs): small evolutions
+  run reservoir-count small --only to-ant-3res "${TEST10[@]}"
+  run reservoir-count small --only to-ant-1res "${TEST10[@]}"
+  local d=docs/data/reservoir-count-small k2=docs/data/generalization-morphology-small/to-ant/test-Ant-v5/summary.json
+  .venv/bin/python benchmarks/variant_summary.py "1 reservoir=$d/to-ant-1res/test-Ant-v5/summary.json" \
+      "2 reservoirs=$k2" "3 reservoirs=$d/to-ant-3res/test-Ant-v5/summary.json" \
+      --compare "3 reservoirs" "2 reservoirs" --compare "1 reservoir" "2 reservoirs" \
+      --figure "$d/curves.png" | tee "$d/summary.md"
 }
 step_humanoid() {  # H3: Humanoid <-> HumanoidStandup, small evolution and test
   run generalization-humanoid small
@@ -300,9 +317,9 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
 }
 
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 c8 fft fft_early h3 humanoid hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
+[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res probe h2 c8 fft fft_early h3 humanoid hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"

@@ -1,8 +1,9 @@
-"""C14, C15, C17: reservoir variants (sizes, observed units, other HPs) of one env, trained on the same seeds.
+"""C14-C17: reservoir variants (sizes, observed units, reservoir counts, other HPs) of one env, on the same seeds.
 
 Reads the ``summary.json`` of each variant's test phase (or of an ``ermrl train`` run, for C17's sweep of
 ReservoirPy's other hyperparameters), as ``benchmarks/reproduce_paper.sh sizes observed_units``
-writes them (``runs/experiments/EXPERIMENT-small/STUDY/test/``, collected under ``docs/data/``). Every test phase
+writes them (``runs/experiments/EXPERIMENT-small/STUDY/test/``, or ``test-ENV/`` for a study tested on
+another env, as C16's; collected under ``docs/data/``). Every test phase
 trains its ER-MRL agents and its PPO baselines on the seeds 1000, 1001, ..., so a variant's seed k and another's
 share the env noise and the policy's initialization, not the reservoirs.
 
