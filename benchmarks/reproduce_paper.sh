@@ -108,8 +108,8 @@ step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution,
 step_lunarlander_medium() {  # H1, the LunarLander target's next attempt: the paper's per-trial budget (60 trials
   # × 3 seeds × 300k; `small`'s 50k-step trials score near a random agent), then selection (top 5 × 5 seeds) and
   # the test phase 10 × 3M at lr 1e-4 (PPO's baselines are the `lunarlander` step's, from the store). ≈ 70 min of
-  # evolution (24 agents at ≈ 12.9k agent-steps/s) and ≈ 2.7 h of test here: it resumes across sittings (whole CMA-ES generations; the test model
-  # from its snapshot)
+  # evolution (24 agents at ≈ 12.9k agent-steps/s) and ≈ 2.7 h of test here: it resumes across sittings
+  # (whole CMA-ES generations; the test model from its snapshot)
   run partial-observability medium --only lunarlander-2res --test-lrs 1e-4 --env-workers 0
 }
 step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study's small evolution and selection
@@ -316,10 +316,11 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
 steps=("$@")
-[ ${#steps[@]} -gt 0 ] || steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
+[ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
-  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps" >&2; exit 2; }
+  declare -F "step_$s" >/dev/null || { echo "unknown step '$s'; steps: ${all_steps[*]}" >&2; exit 2; }
 done
 for s in "${steps[@]}"; do
   echo "== $s ($(date -u +%H:%M:%S))"
