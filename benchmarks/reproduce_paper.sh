@@ -108,7 +108,7 @@ step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution,
 step_lunarlander_medium() {  # H1, the LunarLander target's next attempt: the paper's per-trial budget (60 trials
   # × 3 seeds × 300k; `small`'s 50k-step trials score near a random agent), then selection (top 5 × 5 seeds) and
   # the test phase 10 × 3M at lr 1e-4 (PPO's baselines are the `lunarlander` step's, from the store). ≈ 70 min of
-  # evolution (24 agents at ≈ 12.9k agent-steps/s) and ≈ 2.7 h of test here: it resumes across sittings
+  # evolution (24 agents at ≈ 12.9k agent-steps/s) and ≈ 1 h of test here (run 2026-11-25: 77 + 16 + 62 min): it resumes across sittings
   # (whole CMA-ES generations; the test model from its snapshot)
   run partial-observability medium --only lunarlander-2res --test-lrs 1e-4 --env-workers 0
 }
