@@ -112,6 +112,21 @@ step_lunarlander_medium() {  # H1, the LunarLander target's next attempt: the pa
   # (whole CMA-ES generations; the test model from its snapshot)
   run partial-observability medium --only lunarlander-2res --test-lrs 1e-4 --env-workers 0
 }
+step_lunarlander_lr3e4() {  # H1, diagnostic of the LunarLander target's miss: the `medium` Φ* was evolved and selected
+  # at lr 3e-4 but tested at 1e-4 (the paper's test lr); here it trains on the same test seeds (1000-1009, 3M) at
+  # 3e-4, ER-MRL only (≈ 1 h here; resumes from its snapshot), and is paired with its 1e-4 test and full-obs PPO
+  local d=docs/data/partial-observability-medium/lunarlander-2res phi
+  phi=$(phi_flags docs/data/partial-observability-medium/studies.log partial-observability-medium-lunarlander-2res)
+  # shellcheck disable=SC2086
+  [ -f "$d/ermrl-lr3e-4/summary.json" ] || "$E" train --env LunarLanderNoVel-v3 $phi --reservoirs 2 --seeds 10 \
+      --first-seed 1000 --timesteps 3000000 --ppo-lr 3e-4 --env-workers 0 --no-save-agents --quiet --out "$d/ermrl-lr3e-4"
+  .venv/bin/python benchmarks/variant_summary.py "medium Φ*, lr 1e-4=$d/test/summary.json" \
+      "medium Φ*, lr 3e-4=$d/ermrl-lr3e-4/summary.json" \
+      "small Φ*, lr 1e-4=docs/data/partial-observability-small/lunarlander-2res/test/summary.json" \
+      --compare "medium Φ*, lr 3e-4" "medium Φ*, lr 1e-4" --compare "medium Φ*, lr 3e-4" "small Φ*, lr 1e-4" \
+      --compare "medium Φ*, lr 3e-4" "PPO (full observation)" \
+      --figure "$d/lr3e-4-vs-1e-4.png" | tee "$d/lr3e-4-vs-1e-4.md"
+}
 step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study's small evolution and selection
   # with one reservoir, its Φ* trained on the test seeds (1000-1009, 3M steps, lr 1e-4; ≈ 2 h here, resumes from
   # docs/data/c3-lunarlander/ermrl-1res.snapshot), ER-MRL only (the PPO baselines are the 2-reservoir test
@@ -316,7 +331,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do

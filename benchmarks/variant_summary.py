@@ -10,8 +10,9 @@ share the env noise and the policy's initialization, not the reservoirs.
 Prints a Markdown table: each variant's ER-MRL row (n, mean ± std, IQM [95% CI], the area under the curve over
 the first 300k steps), then the PPO rows of the first test phase; then, for each ``--compare A B``,
 P(A > B) with its 95% CI (rliable) and the paired difference A − B over the shared seeds (SciPy: BCa CI,
-Wilcoxon p). With ``--figure PATH``, it also draws the variants' ER-MRL learning curves (mean ± std over the
-seeds) and the first test phase's PPO curves on one plot, from the ``curves.csv`` beside each ``summary.json``.
+Wilcoxon p); A or B may also name a PPO row of the first test phase (e.g. "PPO (full observation)"). With
+``--figure PATH``, it also draws the variants' ER-MRL learning curves (mean ± std over the seeds) and the first
+test phase's PPO curves on one plot, from the ``curves.csv`` beside each ``summary.json``.
 
 Example (C15):
     .venv/bin/python benchmarks/variant_summary.py \\
@@ -74,10 +75,6 @@ def table(variants: dict[str, Path], comparisons: list[tuple[str, str]]) -> str:
     """The Markdown table of ``variants`` ({label: summary.json}) and the ``comparisons`` (pairs of labels)."""
     from ermrl.analysis.statistics import format_ci, paired_difference, probability_of_improvement, summarize
 
-    for a, b in comparisons:
-        for name in (a, b):
-            if name not in variants:
-                raise ValueError(f"--compare names {name!r}, which is none of the variants ({', '.join(variants)})")
     scores, lines = {}, ["| model | n | mean ± std | IQM [95% CI] | AUC 0–300k |", "|---|---|---|---|---|"]
 
     def line(name: str, row: dict) -> str:
@@ -93,6 +90,13 @@ def table(variants: dict[str, Path], comparisons: list[tuple[str, str]]) -> str:
         ppo_rows = ppo if ppo_rows is None else ppo_rows
     lines += [line(r["model"], r) for r in ppo_rows or []]
     lines.append("")
+    for r in ppo_rows or []:  # a PPO row of the first test phase is comparable by its model name
+        scores.setdefault(r["model"], per_seed(r))
+    for a, b in comparisons:
+        for name in (a, b):
+            if name not in scores:
+                raise ValueError(f"--compare names {name!r}, which is none of the variants or PPO rows "
+                                 f"({', '.join(scores)})")
     for a, b in comparisons:
         p = probability_of_improvement(list(scores[a].values()), list(scores[b].values()))
         shared = sorted(set(scores[a]) & set(scores[b]))
@@ -132,7 +136,8 @@ def main(argv=None) -> int:
     parser.add_argument("variants", nargs="+", type=_variant, metavar="LABEL=SUMMARY.json",
                         help="a variant's name and its test phase's summary.json")
     parser.add_argument("--compare", nargs=2, action="append", default=[], metavar=("A", "B"),
-                        help="print P(A > B) and the paired difference A − B (repeatable)")
+                        help="print P(A > B) and the paired difference A − B (repeatable); A or B: a variant's label "
+                             "or a PPO row's model name, e.g. 'PPO (full observation)'")
     parser.add_argument("--figure", type=Path, metavar="PATH.png",
                         help="also draw every variant's ER-MRL learning curve and the PPO curves there")
     args = parser.parse_args(argv)

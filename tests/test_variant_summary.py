@@ -43,6 +43,11 @@ def test_table_gives_every_variant_and_pairs_their_seeds(tmp_path):
     p = format_ci(*probability_of_improvement(SMALL, kept), digits=2)
     paired = paired_difference([v for v, w in zip(SMALL, LARGE) if w is not None], kept)
     assert f"- P(100 units > 1000 units) = {p}; paired 100 units − 1000 units over 9 seeds: {paired}" in done.stdout
+    done = _run(f"100 units={small}", "--compare", "100 units", "PPO (same observation)")  # a PPO row, by its name
+    assert done.returncode == 0, done.stderr
+    p, paired = format_ci(*probability_of_improvement(SMALL, PPO), digits=2), paired_difference(SMALL, PPO)
+    assert f"- P(100 units > PPO (same observation)) = {p}; paired 100 units − PPO (same observation) over 10 " \
+           f"seeds: {paired}" in done.stdout
 
 
 def _curves(folder: Path, ermrl: np.ndarray, models=("ER-MRL lr 0.0001", "PPO (same observation)")) -> None:
@@ -109,7 +114,7 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
     two_rates = _summary(tmp_path / "two", SMALL, LARGE)
     cases = [
         ((f"a={two_rates}",), f"{two_rates} has 2 ER-MRL rows; give a test phase of one learning rate"),
-        ((f"a={small}", "--compare", "a", "b"), "--compare names 'b', which is none of the variants (a)"),
+        ((f"a={small}", "--compare", "a", "b"), "--compare names 'b', which is none of the variants or PPO rows (a, PPO (same observation))"),
         ((f"a={small}", f"a={small}"), "two variants are named 'a'; name each once"),
         ((str(small),), f"{str(small)!r} is not LABEL=SUMMARY.json"),
         ((f"a={tmp_path / 'missing.json'}",), "No such file or directory"),
