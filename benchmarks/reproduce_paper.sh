@@ -200,6 +200,20 @@ step_observed_units() {  # C15: CartPoleNoVel reading 100 of 100, 1000 of 1000 a
       --compare "100 of 100" "1000 of 1000" --compare "100 of 1000" "1000 of 1000" \
       --compare "100 of 1000" "100 of 100" --figure "$d/curves.png" | tee "$d/summary.md"
 }
+step_observed_units_lr3e4() {  # C15 / the CartPole target, a diagnostic: the 1000-of-1000 Φ* (evolved and selected
+  # at lr 3e-4, tested at 1e-4: 474.2) trained on the same test seeds (1000-1009, 1M) at 3e-4, ER-MRL only (≈ 45 min
+  # here, resumes from its snapshot), paired with its 1e-4 test phase and the 100-unit variants
+  local d=docs/data/observed-units-small phi
+  phi=$(phi_flags "$d/studies.log" observed-units-small-1000-of-1000)
+  # shellcheck disable=SC2086
+  [ -f "$d/1000-of-1000/ermrl-lr3e-4/summary.json" ] || "$E" train --env CartPoleNoVel-v1 $phi --units 1000 \
+      --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 3e-4 --no-save-agents --quiet \
+      --out "$d/1000-of-1000/ermrl-lr3e-4"
+  .venv/bin/python benchmarks/variant_summary.py "1000 of 1000, lr 1e-4=$d/1000-of-1000/test/summary.json" \
+      "1000 of 1000, lr 3e-4=$d/1000-of-1000/ermrl-lr3e-4/summary.json" \
+      --compare "1000 of 1000, lr 3e-4" "1000 of 1000, lr 1e-4" \
+      --figure "$d/1000-of-1000/lr3e-4-vs-1e-4.png" | tee "$d/1000-of-1000/lr3e-4-vs-1e-4.md"
+}
 step_sizes() {  # C14: CartPoleNoVel and PendulumNoVel at 25 to 1000 units, small evolutions, each tested 10 × 1M
   # (the two Humanoid studies of the experiment, ≈ 245 h at the paper's scale, are left out here)
   run reservoir-sizes small --only cartpole-25u cartpole-50u cartpole-100u cartpole-200u cartpole-500u \
@@ -331,7 +345,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units sizes other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 sizes other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
