@@ -125,7 +125,8 @@ step_lunarlander_lr3e4() {  # H1, diagnostic of the LunarLander target's miss: t
       "small Φ*, lr 1e-4=docs/data/partial-observability-small/lunarlander-2res/test/summary.json" \
       --compare "medium Φ*, lr 3e-4" "medium Φ*, lr 1e-4" --compare "medium Φ*, lr 3e-4" "small Φ*, lr 1e-4" \
       --compare "medium Φ*, lr 3e-4" "PPO (full observation)" \
-      --figure "$d/lr3e-4-vs-1e-4.png" | tee "$d/lr3e-4-vs-1e-4.md"
+      --title "evolved Φ* at PPO lr 1e-4 and 3e-4, the same seeds" --figure "$d/lr3e-4-vs-1e-4.png" \
+      | tee "$d/lr3e-4-vs-1e-4.md"
 }
 step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study's small evolution and selection
   # with one reservoir, its Φ* trained on the test seeds (1000-1009, 3M steps, lr 1e-4; ≈ 2 h here, resumes from
@@ -212,7 +213,8 @@ step_observed_units_lr3e4() {  # C15 / the CartPole target, a diagnostic: the 10
   .venv/bin/python benchmarks/variant_summary.py "1000 of 1000, lr 1e-4=$d/1000-of-1000/test/summary.json" \
       "1000 of 1000, lr 3e-4=$d/1000-of-1000/ermrl-lr3e-4/summary.json" \
       --compare "1000 of 1000, lr 3e-4" "1000 of 1000, lr 1e-4" \
-      --figure "$d/1000-of-1000/lr3e-4-vs-1e-4.png" | tee "$d/1000-of-1000/lr3e-4-vs-1e-4.md"
+      --title "evolved Φ* at PPO lr 1e-4 and 3e-4, the same seeds" --figure "$d/1000-of-1000/lr3e-4-vs-1e-4.png" \
+      | tee "$d/1000-of-1000/lr3e-4-vs-1e-4.md"
 }
 step_sizes() {  # C14: CartPoleNoVel and PendulumNoVel at 25 to 1000 units, small evolutions, each tested 10 × 1M
   # (the two Humanoid studies of the experiment, ≈ 245 h at the paper's scale, are left out here)

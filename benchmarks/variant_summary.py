@@ -140,6 +140,8 @@ def main(argv=None) -> int:
                              "or a PPO row's model name, e.g. 'PPO (full observation)'")
     parser.add_argument("--figure", type=Path, metavar="PATH.png",
                         help="also draw every variant's ER-MRL learning curve and the PPO curves there")
+    parser.add_argument("--title", default="reservoir variants, the same seeds",
+                        help="the figure's title, after the env id (e.g. 'Φ* at two learning rates')")
     args = parser.parse_args(argv)
     labels = [label for label, _ in args.variants]
     if len(set(labels)) != len(labels):
@@ -154,7 +156,7 @@ def main(argv=None) -> int:
 
             first = json.loads(args.variants[0][1].read_text())
             env_id = (first if isinstance(first, dict) else first[0]).get("env_id", "")
-            learning_curves(drawn, f"{env_id}: reservoir variants, the same seeds", args.figure.with_suffix(".png"))
+            learning_curves(drawn, f"{env_id}: {args.title}", args.figure.with_suffix(".png"))
     except (OSError, ValueError) as e:
         parser.error(str(e))  # exit code 2
     return 0

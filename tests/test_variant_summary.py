@@ -68,6 +68,10 @@ def test_figure_draws_each_variants_curve_and_the_ppo_curves(tmp_path):
     done = _run(f"100 units={small}", f"1000 units={large}", "--figure", tmp_path / "fig.png")
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "fig.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    done = _run(f"100 units={small}", f"1000 units={large}", "--figure", tmp_path / "titled.png",
+                "--title", "two learning rates")  # the same curves under another title: another image
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "titled.png").read_bytes() != (tmp_path / "fig.png").read_bytes()
     spec = importlib.util.spec_from_file_location("variant_summary", SCRIPT)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
