@@ -114,7 +114,8 @@ step_lunarlander_medium() {  # H1, the LunarLander target's next attempt: the pa
 }
 step_lunarlander_lr3e4() {  # H1, diagnostic of the LunarLander target's miss: the `medium` Φ* was evolved and selected
   # at lr 3e-4 but tested at 1e-4 (the paper's test lr); here it trains on the same test seeds (1000-1009, 3M) at
-  # 3e-4, ER-MRL only (≈ 1 h here; resumes from its snapshot), and is paired with its 1e-4 test and full-obs PPO
+  # 3e-4, ER-MRL only (53 min here on 2026-11-25; resumes from its snapshot), and is paired with its 1e-4 test, the
+  # `small` Φ*'s and full-obs PPO
   local d=docs/data/partial-observability-medium/lunarlander-2res phi
   phi=$(phi_flags docs/data/partial-observability-medium/studies.log partial-observability-medium-lunarlander-2res)
   # shellcheck disable=SC2086
@@ -202,8 +203,8 @@ step_observed_units() {  # C15: CartPoleNoVel reading 100 of 100, 1000 of 1000 a
       --compare "100 of 1000" "100 of 100" --figure "$d/curves.png" | tee "$d/summary.md"
 }
 step_observed_units_lr3e4() {  # C15 / the CartPole target, a diagnostic: the 1000-of-1000 Φ* (evolved and selected
-  # at lr 3e-4, tested at 1e-4: 474.2) trained on the same test seeds (1000-1009, 1M) at 3e-4, ER-MRL only (≈ 45 min
-  # here, resumes from its snapshot), paired with its 1e-4 test phase and the 100-unit variants
+  # at lr 3e-4, tested at 1e-4: 474.2) trained on the same test seeds (1000-1009, 1M) at 3e-4, ER-MRL only (30 min
+  # here on 2026-11-25, resumes from its snapshot), paired with its 1e-4 test phase and its PPO baselines
   local d=docs/data/observed-units-small phi
   phi=$(phi_flags "$d/studies.log" observed-units-small-1000-of-1000)
   # shellcheck disable=SC2086
