@@ -1,6 +1,7 @@
 """The baseline store (--baseline-store): a second test phase with another Φ* loads the PPO baselines the first
 one trained, and gets the results it would have trained, bit for bit. Real training on CartPoleNoVel (JAX)."""
 
+import dataclasses
 import json
 
 import jax
@@ -80,3 +81,23 @@ def test_a_second_test_phase_reuses_the_stored_ppo_baselines_and_retrains_a_dama
     assert (f"reused PPO (full observation) from the baseline store ({full}); it was trained with other versions "
             f"(jax 0.4.0 → {jax.__version__}), so it is not bit for bit what this machine would train\n"
             in capsys.readouterr().out)
+
+
+def test_studies_evolved_at_other_rates_share_the_baselines_of_one_ppo_rate(tmp_path):
+    """The baselines train at the test's PPO rate (the population's traced rate), so their place in the store must
+    not depend on the rate the study was evolved at; it did, and a study evolved at 1e-4 trained again the PPO
+    baselines that one evolved at 3e-4 had stored for the same seeds and budget."""
+    def config(lr):
+        train = TrainConfig(env_id=ENV, total_timesteps=2048)
+        train = dataclasses.replace(train, ppo=dataclasses.replace(train.ppo, learning_rate=lr))
+        return EvolveConfig(train=train, space=SearchSpace(1, fixed_iss=1.0), trials=2, seeds=1)
+
+    store = tmp_path / "store"
+    test = evaluation.TestConfig(seeds=2, timesteps=2048, ppo_lr=3e-4)
+    at_1e4, at_3e4 = (evaluation.baseline_files(config(lr), test, store) for lr in (1e-4, 3e-4))
+    assert at_1e4 == at_3e4 and len(at_1e4) == 2
+    for _, _, train, population, _ in evaluation.baseline_jobs(config(1e-4).train, [1000, 1001], 3e-4, True):
+        assert train.ppo.learning_rate == 3e-4 and np.allclose(population.learning_rate, 3e-4)
+    # without --ppo-lr the baselines train at each study's own rate, so they are kept apart
+    own = evaluation.TestConfig(seeds=2, timesteps=2048)
+    assert evaluation.baseline_files(config(1e-4), own, store) != evaluation.baseline_files(config(3e-4), own, store)

@@ -233,16 +233,19 @@ def baseline_jobs(base, seeds: list[int], ppo_lr: float, recurrent_baseline: boo
     as (kind, folder, TrainConfig, Population, [label]) each: PPO on the same observation, on the full one (masked
     envs), and PPO-LSTM if asked; ``seeds`` agents each at learning rate ``ppo_lr``. Their agent is plain PPO,
     ``AgentConfig(reservoirs=0)``, whatever ``base``'s reservoirs (units, observed units, fed action: unused
-    without a reservoir), so that test phases of reservoirs of any size share their baselines in a store."""
+    without a reservoir), and their PPO config holds ``ppo_lr``, the rate they train at, not the evolution's (the
+    trainer steps at the population's rate), so that test phases of reservoirs of any size, evolved at any rate,
+    share their baselines in a store."""
     base_id, deleted = masking.parse(base.env_id)
-    plain = dataclasses.replace(base, agent=AgentConfig(reservoirs=0))
+    plain = dataclasses.replace(base, agent=AgentConfig(reservoirs=0),
+                                ppo=dataclasses.replace(base.ppo, learning_rate=ppo_lr))
     grid = Population.grid(Phi(1.0, 1.0, 1.0), seeds, ppo_lr, 0)
     jobs = [("PPO", "ppo", plain, grid, ["PPO (same observation)"])]
     if deleted:
         jobs.append(("PPO", "ppo-full-observation", dataclasses.replace(plain, env_id=base_id), grid,
                      ["PPO (full observation)"]))
     if recurrent_baseline:
-        lstm = dataclasses.replace(plain, ppo=dataclasses.replace(plain.ppo, model="lstm", learning_rate=ppo_lr))
+        lstm = dataclasses.replace(plain, ppo=dataclasses.replace(plain.ppo, model="lstm"))
         jobs.append(("PPO-LSTM", "ppo-lstm", lstm, grid, ["PPO-LSTM (same observation)"]))
     return jobs
 
