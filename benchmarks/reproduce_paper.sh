@@ -217,6 +217,29 @@ step_observed_units_lr3e4() {  # C15 / the CartPole target, a diagnostic: the 10
       --title "evolved Φ* at PPO lr 1e-4 and 3e-4, the same seeds" --figure "$d/1000-of-1000/lr3e-4-vs-1e-4.png" \
       | tee "$d/1000-of-1000/lr3e-4-vs-1e-4.md"
 }
+step_fitness_1m() {  # the CartPole and Pendulum targets, a diagnostic: evolutions whose trials train 1M steps (the
+  # test budget) instead of 300k, so that the fitness ranks Φ by what the test phase measures; 60 trials × 3 seeds at
+  # lr 1e-4, iss 1.0, then selection (top 5 × 5 seeds × 1M) and the test phase (10 × 1M, ER-MRL at 1e-4, PPO at
+  # 3e-4). Ran on one H100 on 2026-11-25 (both evolutions ≈ 18 min together, selection 2 min); on 2 CPU cores
+  # each evolution is 180M agent-steps, ≈ 45-50 min alone. ERMRL=... can point at another interpreter's CLI.
+  local d=docs/data/fitness-1m env s
+  for env in CartPoleNoVel-v1 PendulumNoVel-v1; do
+    s=$(echo "${env%NoVel-v1}" | tr '[:upper:]' '[:lower:]')
+    "$E" evolve --env "$env" --trials 60 --seeds 3 --timesteps 1000000 --fixed-iss 1.0 --ppo-lr 1e-4 \
+        --study "$s-1res-fitness-1m" --storage "$d/studies.log" --out "runs/fitness-1m/$s" --quiet
+    "$E" select --study "$s-1res-fitness-1m" --storage "$d/studies.log" --out "runs/fitness-1m/$s" --top 5 --seeds 5 --quiet
+    [ -f "$d/$s/test/summary.json" ] || {
+      "$E" test --study "$s-1res-fitness-1m" --storage "$d/studies.log" --out "runs/fitness-1m/$s" --seeds 10 \
+          --timesteps 1000000 --ermrl-lr 1e-4 --ppo-lr 3e-4 --baseline-store docs/data/baseline-models --quiet
+      mkdir -p "$d/$s/test"
+      cp "runs/fitness-1m/$s"/test/{summary.json,summary.csv,curves.csv,test_config.json,test_phase.png} "$d/$s/test/"
+    }
+  done
+  # the default Φ (sr 0.95, lr 0.5, iss 1), not evolved, on the same test seeds: what the Pendulum evolutions miss
+  [ -f "$d/default-phi-pendulum/summary.json" ] || "$E" train --env PendulumNoVel-v1 --sr 0.95 --lr 0.5 --iss 1.0 \
+      --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet \
+      --out "$d/default-phi-pendulum"
+}
 step_sizes() {  # C14: CartPoleNoVel and PendulumNoVel at 25 to 1000 units, small evolutions, each tested 10 × 1M
   # (the two Humanoid studies of the experiment, ≈ 245 h at the paper's scale, are left out here)
   run reservoir-sizes small --only cartpole-25u cartpole-50u cartpole-100u cartpole-200u cartpole-500u \
@@ -348,7 +371,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 sizes other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
