@@ -264,6 +264,15 @@ step_probe() {  # H1, C4: velocity R² of each H1 study's Φ*, against the defau
     "$E" analyze probe --env "$env" --study "$data-$study" --storage "docs/data/$data/studies.log" \
         --out "docs/data/$data/probe/$name.png"
   done
+  # the studies run by their own steps (`fitness_1m`, `seed_schedule_paper`), whose names are not EXPERIMENT-STUDY
+  for spec in CartPoleNoVel-v1:fitness-1m:cartpole-1res-fitness-1m:cartpole \
+              PendulumNoVel-v1:fitness-1m:pendulum-1res-fitness-1m:pendulum \
+              CartPoleNoVel-v1:seed-schedule:cartpole-1res-generation-900:cartpole-generation-900; do
+    IFS=: read -r env data study name <<<"$spec"
+    [ -f "docs/data/$data/studies.log" ] || continue
+    "$E" analyze probe --env "$env" --study "$study" --storage "docs/data/$data/studies.log" \
+        --out "docs/data/$data/probe/$name.png"
+  done
 }
 phi_flags() {  # phi_flags STORAGE STUDY: the study's Φ* (selected, else best) as `--sr .. --lr .. --iss ..`
   .venv/bin/python - "$1" "$2" <<'PY'
