@@ -248,3 +248,31 @@ def test_a_finished_test_phase_is_kept_across_new_test_config_fields(tmp_path):
     assert not runner._test_done(tmp_path, test, 8)
     assert not runner._test_done(tmp_path, dataclasses.replace(test, seeds=4), 7)
     assert not runner._test_done(tmp_path, dataclasses.replace(test, recurrent_baseline=True), 7)
+
+
+def test_select_says_when_trials_tie_at_its_cut(tmp_path):
+    """A ceiling (CartPole's 500) ties many trials; the top K are then simply the first by trial number, and
+    `select` says so before it trains, with the --top that would take them all."""
+    from ermrl import storage
+    from ermrl.evolution.config import EvolveConfig
+    from ermrl.evolution.search_space import SearchSpace
+    from ermrl.evolution.study import ATTR, make_storage
+
+    journal = tmp_path / "studies.log"
+    space = SearchSpace(1, fixed_iss=1.0)
+    config = EvolveConfig(train=TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048), space=space,
+                          trials=5, seeds=1)
+    study = optuna.create_study(storage=make_storage(str(journal)), study_name="ties", direction="maximize")
+    study.set_user_attr(ATTR, storage.encode_study_record(config))
+    for lr, value in ((0.5, 40.0), (0.6, 500.0), (0.7, 500.0), (0.8, 500.0), (0.9, 500.0)):
+        study.add_trial(optuna.trial.create_trial(params={"sr": 0.95, "lr": lr}, distributions=space.distributions(),
+                                                  value=value))
+    r = cli("select", "--study", "ties", "--storage", str(journal), "--out", str(tmp_path / "run"), "--top", "2",
+            "--seeds", "1", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("note: 2 more trials tie at the cut's fitness (500), so the top 2 are the first of "
+                               "them by trial number; --top 4 re-evaluates them all\n")
+    assert load_study(str(journal), "ties").user_attrs["selection"]["trials"] == [1, 2]
+    r = cli("select", "--study", "ties", "--storage", str(journal), "--out", str(tmp_path / "run"), "--top", "4",
+            "--seeds", "1", "--quiet")
+    assert r.returncode == 0 and not r.stdout.startswith("note:"), r.stdout

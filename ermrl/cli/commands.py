@@ -281,13 +281,18 @@ def cmd_evolve(args) -> int:
 
 def cmd_select(args) -> int:
     from ermrl import storage
-    from ermrl.evolution.selection import select
+    from ermrl.evolution.selection import ranked_trials, select, ties_at_cut
     from ermrl.evolution.study import ATTR, load_study
 
     if args.top < 1 or args.seeds < 1:
         raise ConfigError(f"--top and --seeds must be >= 1, got {args.top} and {args.seeds}")
     study = load_study(common.storage_url(args), args.study)
     config = storage.decode_study_record(study.user_attrs[ATTR])
+    ranked = ranked_trials(study)
+    tied = ties_at_cut(ranked, args.top)
+    if tied:
+        print(f"note: {tied} more trials tie at the cut's fitness ({ranked[args.top - 1].value:.4g}), so the top "
+              f"{args.top} are the first of them by trial number; --top {args.top + tied} re-evaluates them all")
     progress, close = common.bars(args.quiet)
     try:
         s = select(study, config, args.top, args.seeds, progress)

@@ -55,6 +55,15 @@ def ranked_trials(study: optuna.Study) -> list[FrozenTrial]:
     return sorted(done, key=lambda t: t.value, reverse=True)
 
 
+def ties_at_cut(trials: list[FrozenTrial], top: int) -> int:
+    """How many of ``trials`` (ranked, best first) past the first ``top`` have the same fitness as the ``top``-th:
+    trials a re-evaluation of the top ``top`` leaves out only because their trial number is larger (a ceiling, such
+    as CartPole's 500, makes many)."""
+    if len(trials) <= top:
+        return 0
+    return sum(1 for t in trials[top:] if t.value == trials[top - 1].value)
+
+
 def load_selection(study: optuna.Study) -> Selection | None:
     data = study.user_attrs.get(ATTR)
     if not data:
