@@ -12,25 +12,23 @@ from __future__ import annotations
 
 import argparse
 import time
-import warnings
 
 import numpy as np
 
 
 def rliable_reference(x: np.ndarray, y: np.ndarray, reps: int) -> tuple:
-    """IQM CI of x, and P(x > y) with CI, from rliable with its own statistic functions."""
+    """IQM CI of x, and P(x > y) with CI, from rliable with its own statistic functions, seeded as ermrl seeds it."""
     from rliable import library, metrics
 
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="random_state is deprecated", category=FutureWarning)
-        np.random.seed(0)
+    from ermrl.analysis.statistics import _rng, _seeded
+
+    with _seeded(0):
         point, ci = library.get_interval_estimates({"m": x[:, None]}, lambda s: np.array([metrics.aggregate_iqm(s)]),
-                                                   reps=reps, random_state=np.random.RandomState(0))
-        iqm = (point["m"][0], ci["m"][0, 0], ci["m"][1, 0])
-        np.random.seed(0)
+                                                   reps=reps, random_state=_rng(0))
+    iqm = (point["m"][0], ci["m"][0, 0], ci["m"][1, 0])
+    with _seeded(0):
         point, ci = library.get_interval_estimates({"xy": [x[:, None], y[:, None]]},
-                                                   metrics.probability_of_improvement, reps=reps,
-                                                   random_state=np.random.RandomState(0))
+                                                   metrics.probability_of_improvement, reps=reps, random_state=_rng(0))
     return iqm, (float(np.ravel(point["xy"])[0]), *map(float, np.ravel(ci["xy"])))
 
 
@@ -46,10 +44,14 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5, help="timed runs of each (default 5); medians printed")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples (default 2000, as ermrl's)")
     args = parser.parse_args()
+    for flag in ("repeats", "reps"):
+        if getattr(args, flag) < 1:
+            parser.error(f"--{flag} must be at least 1, got {getattr(args, flag)}")
     rng = np.random.default_rng(0)
     x, y = rng.normal(400.0, 80.0, 10), rng.normal(45.0, 5.0, 10)
     a, b = ours(x, y, args.reps), rliable_reference(x, y, args.reps)  # also imports rliable before timing
-    assert np.allclose(np.ravel(a), np.ravel(b), rtol=0, atol=0), (a, b)
+    if not np.array_equal(np.ravel(a), np.ravel(b)):
+        raise SystemExit(f"statistics_cost.py: ermrl's statistics {a} differ from rliable's {b}")
     reference = "rliable's own statistics"
     times = {"ermrl": [], reference: []}
     for _ in range(args.repeats):

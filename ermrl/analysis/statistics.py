@@ -78,7 +78,8 @@ class ScoreSummary:
 # computed by the same steps, so to the same bits (tests/test_statistics.py checks it on random and tied scores).
 # They exist for speed only: rliable's bootstrap calls its statistic once a resample (2000 a CI), and SciPy's
 # trim_mean and mannwhitneyu, which rliable's versions call, spend ≈ 1.4 ms a call on argument checks (and
-# mannwhitneyu on an exact p-value that the statistic discards). A test phase spent ≈ 30% of its time in them.
+# mannwhitneyu on an exact p-value that the statistic discards). The default suite's short test phases spent
+# ≈ 30% of their time in them.
 
 
 def _iqm(scores: np.ndarray) -> float:
