@@ -252,6 +252,26 @@ step_sizes() {  # C14: CartPoleNoVel and PendulumNoVel at 25 to 1000 units, smal
     .venv/bin/python benchmarks/variant_summary.py "${args[@]}" --figure "$d/$env.png" | tee "$d/$env.md"
   done
 }
+step_sizes_medium() {  # C14 and the Pendulum target: PendulumNoVel at 500 and 1000 units with the paper's per-trial
+  # budget (`medium`: 60 trials × 3 seeds × 300k, top 5 on 5 seeds), each Φ* tested 10 × 1M at lr 1e-4; then the
+  # default Φ at 500 units on the same test seeds (size without evolution). 2026-11-26: the 500-unit study was evolved,
+  # selected and tested on one H200 (≈ 5 min), the 1000-unit one evolved and selected there (≈ 5 min) and tested here
+  run reservoir-sizes medium --only pendulum-500u pendulum-1000u "${TEST10[@]}"
+  local d=docs/data/reservoir-sizes-medium s=docs/data/reservoir-sizes-small
+  [ -f "$d/default-phi-500u/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 \
+      --iss 1.0 --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet \
+      --out "$d/default-phi-500u"
+  .venv/bin/python benchmarks/variant_summary.py "500 units=$d/pendulum-500u/test/summary.json" \
+      "1000 units=$d/pendulum-1000u/test/summary.json" "500 units small=$s/pendulum-500u/test/summary.json" \
+      "1000 units small=$s/pendulum-1000u/test/summary.json" "100 units small=$s/pendulum-100u/test/summary.json" \
+      "default Φ 500 units=$d/default-phi-500u/summary.json" \
+      "default Φ 100 units=docs/data/fitness-1m/default-phi-pendulum/summary.json" \
+      --compare "500 units" "500 units small" --compare "1000 units" "1000 units small" \
+      --compare "500 units" "100 units small" --compare "500 units" "default Φ 500 units" \
+      --compare "1000 units" "default Φ 500 units" --compare "500 units" "default Φ 100 units" \
+      --compare "default Φ 500 units" "default Φ 100 units" \
+      --title "reservoir sizes, medium evolutions" --figure "$d/pendulum.png" | tee "$d/pendulum.md"
+}
 step_probe() {  # H1, C4: velocity R² of each H1 study's Φ*, against the default Φ and a memoryless one (1 reservoir)
   local spec env data study name
   for spec in CartPoleNoVel-v1:partial-observability-paper:cartpole-1res:cartpole \
@@ -380,7 +400,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do

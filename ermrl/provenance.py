@@ -33,7 +33,8 @@ ISA_FLAGS = (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"), ("sse4_2"
 
 def software() -> dict[str, str | None]:
     """{"python": "3.11.2", "cpu": "x86_64 AVX-512", "xla_flags": $XLA_FLAGS or None, package: version or None
-    when it is not installed} for :data:`PACKAGES`."""
+    when it is not installed} for :data:`PACKAGES`. ermrl run from a source tree without being installed (as on a
+    lent GPU machine, ``PYTHONPATH=.``) records its own ``__version__``."""
     versions: dict[str, str | None] = {"python": platform.python_version(), "cpu": cpu(),
                                        "xla_flags": os.environ.get("XLA_FLAGS") or None}
     for name in PACKAGES:
@@ -41,6 +42,9 @@ def software() -> dict[str, str | None]:
             versions[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             versions[name] = None
+    if versions.get("ermrl") is None and "ermrl" in PACKAGES:
+        from ermrl import __version__  # the package itself, imported from a source tree
+        versions["ermrl"] = __version__
     return versions
 
 

@@ -9,6 +9,7 @@ import jax
 import mujoco
 import optuna
 
+import ermrl
 from ermrl import provenance
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.search_space import SearchSpace
@@ -32,6 +33,21 @@ def test_software_names_the_installed_versions_and_none_for_a_missing_package(mo
     assert provenance.software() == {"python": platform.python_version(), "cpu": provenance.cpu(),
                                      "xla_flags": "--xla_cpu_max_isa=AVX2", "jax": jax.__version__,
                                      "no-such-distribution": None}
+
+
+def test_ermrl_run_from_a_source_tree_records_its_own_version(monkeypatch):
+    # on a lent GPU machine ermrl runs from the checkout (PYTHONPATH), not installed: no distribution metadata
+    installed = importlib.metadata.version
+
+    def version(name):
+        if name == "ermrl":
+            raise importlib.metadata.PackageNotFoundError(name)
+        return installed(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", version)
+    versions = provenance.software()
+    assert versions["ermrl"] == ermrl.__version__ is not None
+    assert versions["jax"] == jax.__version__
 
 
 def test_cpu_names_the_widest_vector_extension_xla_may_use(tmp_path):
