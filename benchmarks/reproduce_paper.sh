@@ -272,6 +272,21 @@ step_sizes_medium() {  # C14 and the Pendulum target: PendulumNoVel at 500 and 1
       --compare "default Φ 500 units" "default Φ 100 units" \
       --title "reservoir sizes, medium evolutions" --figure "$d/pendulum.png" | tee "$d/pendulum.md"
 }
+step_sizes_medium_lr3e4() {  # C6 / the Pendulum target, a diagnostic: the 500-unit `medium` Φ* (evolved and
+  # selected at lr 3e-4, tested at 1e-4) trained on the same test seeds (1000-1009, 1M) at 3e-4, ER-MRL only, paired
+  # with its 1e-4 test phase: the second look that step observed_units_lr3e4 gave C15's Φ*
+  local d=docs/data/reservoir-sizes-medium phi
+  phi=$(phi_flags "$d/studies.log" reservoir-sizes-medium-pendulum-500u)
+  # shellcheck disable=SC2086
+  [ -f "$d/pendulum-500u/ermrl-lr3e-4/summary.json" ] || "$E" train --env PendulumNoVel-v1 $phi --units 500 \
+      --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 3e-4 --no-save-agents --quiet \
+      --out "$d/pendulum-500u/ermrl-lr3e-4"
+  .venv/bin/python benchmarks/variant_summary.py "500 units, lr 1e-4=$d/pendulum-500u/test/summary.json" \
+      "500 units, lr 3e-4=$d/pendulum-500u/ermrl-lr3e-4/summary.json" \
+      --compare "500 units, lr 3e-4" "500 units, lr 1e-4" \
+      --title "evolved Φ* at PPO lr 1e-4 and 3e-4, the same seeds" --figure "$d/pendulum-500u/lr3e-4-vs-1e-4.png" \
+      | tee "$d/pendulum-500u/lr3e-4-vs-1e-4.md"
+}
 step_probe() {  # H1, C4: velocity R² of each H1 study's Φ*, against the default Φ and a memoryless one (1 reservoir)
   local spec env data study name
   for spec in CartPoleNoVel-v1:partial-observability-paper:cartpole-1res:cartpole \
@@ -400,7 +415,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
