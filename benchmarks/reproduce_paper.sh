@@ -287,6 +287,17 @@ step_sizes_medium_lr3e4() {  # C6 / the Pendulum target, a diagnostic: the 500-u
       --title "evolved Φ* at PPO lr 1e-4 and 3e-4, the same seeds" --figure "$d/pendulum-500u/lr3e-4-vs-1e-4.png" \
       | tee "$d/pendulum-500u/lr3e-4-vs-1e-4.md"
 }
+step_probe_sizes() {  # C4 at C14's sizes: velocity R² of the 500-unit CartPole Φ* (`small`, the target's) and the
+  # 500- and 1000-unit Pendulum Φ* (`medium`), against the default Φ and a memoryless reservoir of the same size
+  local spec env units exp study
+  for spec in "CartPoleNoVel-v1 500 small cartpole" "PendulumNoVel-v1 500 medium pendulum" \
+              "PendulumNoVel-v1 1000 medium pendulum"; do
+    read -r env units exp study <<<"$spec"
+    local d=docs/data/reservoir-sizes-$exp
+    [ -f "$d/probe/$study-${units}u.md" ] || "$E" analyze probe --env "$env" --units "$units" \
+        --study "reservoir-sizes-$exp-$study-${units}u" --storage "$d/studies.log" --out "$d/probe/$study-${units}u.png"
+  done
+}
 step_probe() {  # H1, C4: velocity R² of each H1 study's Φ*, against the default Φ and a memoryless one (1 reservoir)
   local spec env data study name
   for spec in CartPoleNoVel-v1:partial-observability-paper:cartpole-1res:cartpole \
@@ -415,7 +426,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
