@@ -287,6 +287,11 @@ step_sizes_medium_lr3e4() {  # C6 / the Pendulum target, a diagnostic: the 500-u
       --title "evolved Φ* at PPO lr 1e-4 and 3e-4, the same seeds" --figure "$d/pendulum-500u/lr3e-4-vs-1e-4.png" \
       | tee "$d/pendulum-500u/lr3e-4-vs-1e-4.md"
 }
+step_pendulum_paper_500u() {  # the Pendulum target's next test (C14's variant at the paper's scale): PendulumNoVel
+  # with 500 units, 900 trials × 3 seeds × 300k, top 5 on 5 seeds, test 10 × 1M; ≈ 17–21 h here (5.6–8.4 min a
+  # generation of 18 agents), ≈ 43 min of evolution on one H200; resumes by whole generations. Started 2026-11-26
+  run reservoir-sizes paper --only pendulum-500u "${TEST10[@]}"
+}
 step_probe_sizes() {  # C4 at C14's sizes: velocity R² of the 500-unit CartPole Φ* (`small`, the target's) and the
   # 500- and 1000-unit Pendulum Φ* (`medium`), against the default Φ and a memoryless reservoir of the same size
   local spec env units exp study
@@ -426,7 +431,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
