@@ -117,6 +117,7 @@ def test_a_stopped_test_phase_keeps_its_finished_models_and_ends_as_an_uninterru
     assert len(kept) == 1 and kept[0].startswith("    test on CartPoleNoVel-v1: kept ER-MRL lr 0.0001 (sr ")
     assert "ER-MRL lr 0.0003 (sr " in kept[0]
     assert "ER-MRL" not in started and started[-2:] == ["PPO (same observation)", "PPO (full observation)"]
+    assert not any(label.startswith("evolve ") for label in started)  # its evolution was complete: no bar
     assert not (folder / STUDY / "test.partial").exists()
 
     ours, theirs = folder / STUDY / "test", evolved / STUDY / "test"

@@ -218,9 +218,10 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
     phase stopped midway keeps its finished models for the rerun (:mod:`ermrl.experiments.checkpoints`), and with
     ``baseline_store`` the PPO baselines are shared with other test phases (:mod:`ermrl.experiments.baseline_models`)."""
     import optuna
+    from optuna.trial import TrialState
 
     from ermrl.analysis.experiment_report import write_experiment_report
-    from ermrl.evolution.evolve import evolve, make_trainers
+    from ermrl.evolution.evolve import count, evolve, make_trainers
     from ermrl.evolution.selection import load_selection, select
     from ermrl.evolution.study import ATTR, make_sampler, open_study
     from ermrl.experiments import baseline_runs, baselines, checkpoints
@@ -242,7 +243,9 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
         study = open_study(url, p.study, make_sampler(config.sampler, config.generation_size, config.sampler_seed),
                            storage.encode_study_record(config))
         config = dataclasses.replace(config, baselines=storage.decode_study_record(study.user_attrs[ATTR]).baselines)
-        bar = progress(f"evolve {p.spec.name}") if progress else None
+        # no bar for a finished evolution: entering one prints "compiling" where nothing trains
+        evolving = count(study, TrialState.COMPLETE) < config.trials
+        bar = progress(f"evolve {p.spec.name}") if progress and evolving else None
         evolve(study, config, make_trainers(config), (lambda g: bar(g.train) if g.train else None) if bar else None)
         sel = load_selection(study)
         if selection_left(p, study):
