@@ -41,11 +41,15 @@ def software() -> dict[str, str | None]:
         try:
             versions[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
-            versions[name] = None
-    if versions.get("ermrl") is None and "ermrl" in PACKAGES:
-        from ermrl import __version__  # the package itself, imported from a source tree
-        versions["ermrl"] = __version__
+            versions[name] = _source_version() if name == "ermrl" else None
     return versions
+
+
+def _source_version() -> str:
+    """ermrl's ``__version__``: this very package, imported from a source tree without distribution metadata."""
+    from ermrl import __version__
+
+    return __version__
 
 
 def cpu(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
