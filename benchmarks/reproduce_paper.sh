@@ -292,6 +292,25 @@ step_pendulum_paper_500u() {  # the Pendulum target's next test (C14's variant a
   # generation of 18 agents), ≈ 43 min of evolution on one H200; resumes by whole generations. Started 2026-11-26
   run reservoir-sizes paper --only pendulum-500u "${TEST10[@]}"
 }
+step_pendulum_500u_lr1e4() {  # the Pendulum target, as `pendulum_lr1e4` at 500 units: C14's 500-unit `medium`
+  # study evolved and selected at lr 1e-4, the paper's rate for the masked tasks, instead of the reference script's
+  # 3e-4 (60 trials × 3 seeds × 300k, top 5 on 5 seeds), its Φ* trained on the test seeds (1000-1009 × 1M) at 1e-4
+  # and compared with the 3e-4-evolved Φ* and the default Φ at 500 units (step `sizes_medium`). ≈ 80 min of
+  # evolution, 11 of selection and 12 of test model here (2026-11-26); resumes by whole generations
+  local d=docs/data/pendulum-500u-lr1e-4 r=runs/pendulum-500u-lr1e-4 s=pendulum-500u-lr1e-4 m=docs/data/reservoir-sizes-medium phi
+  "$E" evolve --env PendulumNoVel-v1 --units 500 --reservoirs 1 --fixed-iss 1.0 --trials 60 --seeds 3 \
+      --timesteps 300000 --ppo-lr 1e-4 --study $s --storage "$d/studies.log" --out "$r"
+  "$E" select --study $s --storage "$d/studies.log" --out "$r" --top 5 --seeds 5 --quiet
+  phi=$(phi_flags "$d/studies.log" $s)
+  # shellcheck disable=SC2086
+  [ -f "$d/ermrl/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 $phi --seeds 10 --first-seed 1000 \
+      --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet --out "$d/ermrl"
+  .venv/bin/python benchmarks/variant_summary.py "evolved at 1e-4=$d/ermrl/summary.json" \
+      "evolved at 3e-4=$m/pendulum-500u/test/summary.json" "default Φ=$m/default-phi-500u/summary.json" \
+      --compare "evolved at 1e-4" "evolved at 3e-4" --compare "evolved at 1e-4" "default Φ" \
+      --title "PendulumNoVel, 500 units, medium evolutions at two learning rates" --figure "$d/pendulum.png" \
+      | tee "$d/summary.md"
+}
 step_probe_sizes() {  # C4 at C14's sizes: velocity R² of the 500-unit CartPole Φ* (`small`, the target's) and the
   # 500- and 1000-unit Pendulum Φ* (`medium`), against the default Φ and a memoryless reservoir of the same size
   local spec env units exp study
@@ -431,7 +450,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_500u_lr1e4 other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
