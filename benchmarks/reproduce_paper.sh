@@ -84,18 +84,24 @@ step_pendulum_paper() {  # H1: PendulumNoVel at the paper's scale (900 trials ×
   # `medium`'s 60 trials never reached the default Φ's region, which beats all of them (docs/paper.md, targets)
   run partial-observability paper --only pendulum-1res
 }
+pendulum_medium_lr1e4() {  # pendulum_medium_lr1e4 STUDY UNITS: a `medium` PendulumNoVel study (60 trials × 3 seeds ×
+  # 300k, top 5 on 5 seeds) evolved and selected at lr 1e-4, journal docs/data/STUDY/studies.log, then its Φ* trained
+  # on the test seeds (1000-1009 × 1M) at 1e-4 into docs/data/STUDY/ermrl/ (skipped once there)
+  local s=$1 units=$2 d=docs/data/$1 phi
+  "$E" evolve --env PendulumNoVel-v1 --units "$units" --reservoirs 1 --fixed-iss 1.0 --trials 60 --seeds 3 \
+      --timesteps 300000 --ppo-lr 1e-4 --study "$s" --storage "$d/studies.log" --out "runs/$s" --quiet
+  "$E" select --study "$s" --storage "$d/studies.log" --out "runs/$s" --top 5 --seeds 5 --quiet
+  phi=$(phi_flags "$d/studies.log" "$s")
+  # shellcheck disable=SC2086
+  [ -f "$d/ermrl/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units "$units" $phi --seeds 10 \
+      --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet --out "$d/ermrl"
+}
 step_pendulum_lr1e4() {  # C6/H1: the `medium` PendulumNoVel study evolved at lr 1e-4, the paper's rate for the
   # masked tasks (App., PPO hyperparameters; the reference's evolution script kept 3e-4, as `pendulum_medium` does),
   # selected like `medium` (top 5 on 5 seeds), then its Φ* trained on the test seeds (1000-1009 × 1M) at 1e-4. The
   # PPO baselines on those seeds and budget are the `pendulum` step's test phase's, so they are not trained again
-  local d=docs/data/pendulum-lr1e-4 r=runs/pendulum-lr1e-4 s=pendulum-lr1e-4 phi
-  "$E" evolve --env PendulumNoVel-v1 --reservoirs 1 --fixed-iss 1.0 --trials 60 --seeds 3 --timesteps 300000 \
-      --ppo-lr 1e-4 --study $s --storage "$d/studies.log" --out "$r" --quiet
-  "$E" select --study $s --storage "$d/studies.log" --out "$r" --top 5 --seeds 5 --quiet
-  phi=$(phi_flags "$d/studies.log" $s)
-  # shellcheck disable=SC2086
-  [ -f "$d/ermrl/summary.json" ] || "$E" train --env PendulumNoVel-v1 $phi --seeds 10 --first-seed 1000 \
-      --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet --out "$d/ermrl"
+  local d=docs/data/pendulum-lr1e-4
+  pendulum_medium_lr1e4 pendulum-lr1e-4 100
   .venv/bin/python benchmarks/variant_summary.py "Φ* evolved at 1e-4=$d/ermrl/summary.json" | tee "$d/summary.md"
 }
 step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution, test 10 × 3M at lr 1e-4
@@ -297,14 +303,8 @@ step_pendulum_500u_lr1e4() {  # the Pendulum target, as `pendulum_lr1e4` at 500 
   # 3e-4 (60 trials × 3 seeds × 300k, top 5 on 5 seeds), its Φ* trained on the test seeds (1000-1009 × 1M) at 1e-4
   # and compared with the 3e-4-evolved Φ* and the default Φ at 500 units (step `sizes_medium`). ≈ 80 min of
   # evolution, 11 of selection and 12 of test model here (2026-11-26); resumes by whole generations
-  local d=docs/data/pendulum-500u-lr1e-4 r=runs/pendulum-500u-lr1e-4 s=pendulum-500u-lr1e-4 m=docs/data/reservoir-sizes-medium phi
-  "$E" evolve --env PendulumNoVel-v1 --units 500 --reservoirs 1 --fixed-iss 1.0 --trials 60 --seeds 3 \
-      --timesteps 300000 --ppo-lr 1e-4 --study $s --storage "$d/studies.log" --out "$r"
-  "$E" select --study $s --storage "$d/studies.log" --out "$r" --top 5 --seeds 5 --quiet
-  phi=$(phi_flags "$d/studies.log" $s)
-  # shellcheck disable=SC2086
-  [ -f "$d/ermrl/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 $phi --seeds 10 --first-seed 1000 \
-      --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet --out "$d/ermrl"
+  local d=docs/data/pendulum-500u-lr1e-4 m=docs/data/reservoir-sizes-medium
+  pendulum_medium_lr1e4 pendulum-500u-lr1e-4 500
   # the 3e-4 study's test phase first: its PPO rows (same seeds and budget) are the table's
   .venv/bin/python benchmarks/variant_summary.py "evolved at 3e-4=$m/pendulum-500u/test/summary.json" \
       "evolved at 1e-4=$d/ermrl/summary.json" "default Φ=$m/default-phi-500u/summary.json" \
