@@ -75,7 +75,11 @@ def postgres_url(postgres_server, request):
     """A fresh, empty database on the session's PostgreSQL server, for one test."""
     import psycopg
 
-    name = "t_" + "".join(c if c.isalnum() else "_" for c in request.node.name.lower())[:50]
+    import hashlib
+
+    # PostgreSQL cuts names at 63 bytes: a readable prefix, then a hash of the whole test id (parametrized ones too)
+    readable = "".join(c if c.isalnum() else "_" for c in request.node.name.lower())[:40]
+    name = f"t_{readable}_{hashlib.sha1(request.node.nodeid.encode()).hexdigest()[:8]}"
     with psycopg.connect(postgres_server, autocommit=True) as conn:
         conn.execute(f'DROP DATABASE IF EXISTS "{name}"')
         conn.execute(f'CREATE DATABASE "{name}"')

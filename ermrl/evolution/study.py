@@ -7,12 +7,8 @@ file (a path ending in ``.log`` or ``.jsonl``, or ``journal:PATH``).
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import random
 import sys
-import time
-import warnings
 from pathlib import Path
 
 import optuna
@@ -20,9 +16,9 @@ import optuna
 from ermrl import provenance
 from ermrl.errors import ConfigError
 from ermrl.evolution.heartbeat import GRACE_PERIOD_S, INTERVAL_S
+from ermrl.evolution.rdb import driver_missing, rdb_storage
 
 SAMPLERS = ("cmaes", "random", "tpe")
-SCHEMA_RETRIES = 5
 ATTR = "ermrl"
 """The study user attribute that holds the evolution's config."""
 SOFTWARE_ATTR = "software"
@@ -57,10 +53,10 @@ def make_storage(url: str, heartbeat: tuple[int, int] | None = None) -> optuna.s
             return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(path)))
         if url.startswith("sqlite:///"):
             Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
-        kwargs = {}
-        if heartbeat is not None:
-            kwargs = {"heartbeat_interval": heartbeat[0], "grace_period": heartbeat[1]}
-        return _rdb_storage(_driver_url(url), _engine_kwargs(url), kwargs)
+        if driver_missing(url):
+            raise ConfigError(f"cannot open storage {shown_url(url)!r}: the PostgreSQL driver is not installed; run "
+                              "pip install 'ermrl[workers]'")
+        return rdb_storage(url, heartbeat)
     except ConfigError:
         raise
     except Exception as e:  # sqlalchemy raises many types; all mean the URL is unusable
@@ -81,40 +77,6 @@ def shown_url(url: str) -> str:
         import re
 
         return re.sub(r"(://[^:/@]*:)[^@]*@", r"\1***@", url)
-
-
-def _rdb_storage(url: str, engine_kwargs: dict, kwargs: dict) -> optuna.storages.RDBStorage:
-    """Optuna's RDB storage; retried when workers started at once race to create the schema of a new database
-    (the losers' CREATE TABLE or CREATE TYPE fails with a duplicate)."""
-    import sqlalchemy.exc
-
-    for attempt in range(SCHEMA_RETRIES):
-        try:
-            with warnings.catch_warnings():  # heartbeat_interval is an ExperimentalWarning in Optuna
-                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-                return optuna.storages.RDBStorage(url, engine_kwargs=engine_kwargs, **kwargs)
-        except (sqlalchemy.exc.IntegrityError, sqlalchemy.exc.ProgrammingError):
-            if attempt == SCHEMA_RETRIES - 1:
-                raise
-            time.sleep(0.2 + random.random())
-
-
-def _driver_url(url: str) -> str:
-    """``url`` with PostgreSQL's driver named: SQLAlchemy's default for ``postgresql://`` is psycopg2, which the
-    ``workers`` extra does not install; psycopg (3) is the one it installs. ConfigError when it is missing."""
-    scheme, sep, rest = url.partition("://")
-    if scheme not in ("postgresql", "postgres", "postgresql+psycopg") or not sep:
-        return url
-    if importlib.util.find_spec("psycopg") is None:
-        raise ConfigError(f"cannot open storage {shown_url(url)!r}: the PostgreSQL driver is not installed; run "
-                          "pip install 'ermrl[workers]'")
-    return f"postgresql+psycopg://{rest}"
-
-
-def _engine_kwargs(url: str) -> dict:
-    if url.startswith(("postgres", "mysql")):
-        return {"connect_args": {"connect_timeout": 5}}
-    return {}
 
 
 def make_sampler(name: str, popsize: int, seed: int | None) -> optuna.samplers.BaseSampler:
