@@ -109,6 +109,16 @@ def test_select_reevaluates_exactly_the_top_k_and_test_uses_the_winner(tmp_path)
     assert selection["trials"] == [t.number for t in ranked[:2]]
     assert selection["seeds"] == [2000, 2001] and len(selection["per_seed"]) == 2
     assert selection["winner"] == selection["trials"][int(np.argmax(selection["values"]))]
+    r = cli("select", "--top", "2", "--seeds", "2", "--quiet", *base)  # a rerun reuses it, trains nothing
+    assert r.returncode == 0 and (
+        f"the top 2 trials were re-evaluated on seeds 2000..2001 already ({selection['date']}); reusing that "
+        "selection (--again re-evaluates them):\n") in r.stdout, r.stdout
+    assert load_study(f"sqlite:///{tmp_path}/study.db", "s").user_attrs["selection"] == selection
+    r = cli("select", "--top", "2", "--seeds", "2", "--again", "--quiet", *base)
+    assert r.returncode == 0 and "re-evaluated the top 2 trials on seeds 2000..2001:\n" in r.stdout, r.stdout
+    assert "already" not in r.stdout
+    again = load_study(f"sqlite:///{tmp_path}/study.db", "s").user_attrs["selection"]
+    assert again["values"] == selection["values"]  # the same seeds give the same re-evaluation
     r = cli("test", "--seeds", "1", "--timesteps", "2048", "--quiet", *base)
     assert r.returncode == 0, r.stderr
     rows = json.loads((tmp_path / "test" / "summary.json").read_text())

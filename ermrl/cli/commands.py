@@ -62,6 +62,9 @@ def add_parsers(sub, formatter) -> None:
     common.study_location(p)
     p.add_argument("--top", type=int, default=5, help="how many of the best trials to re-evaluate")
     p.add_argument("--seeds", type=int, default=5, help="fresh seeds per trial (2000, 2001, ...)")
+    p.add_argument("--again", action="store_true",
+                   help="re-evaluate even when the study already records a selection of these top trials on as "
+                        "many seeds (by default it is reused: a rerun, e.g. of a script, trains nothing)")
     common.config_and_quiet(p)
 
     p = sub.add_parser("test", help="test phase: train Φ* on new seeds against PPO baselines",
@@ -281,7 +284,7 @@ def cmd_evolve(args) -> int:
 
 def cmd_select(args) -> int:
     from ermrl import storage
-    from ermrl.evolution.selection import ranked_trials, select, ties_at_cut
+    from ermrl.evolution.selection import ranked_trials, recorded_selection, select, ties_at_cut
     from ermrl.evolution.study import ATTR, load_study
 
     if args.top < 1 or args.seeds < 1:
@@ -293,12 +296,17 @@ def cmd_select(args) -> int:
     if tied:
         print(f"note: {tied} more trials tie at the cut's fitness ({ranked[args.top - 1].value:.4g}), so the top "
               f"{args.top} are the first of them by trial number; --top {args.top + tied} re-evaluates them all")
-    progress, close = common.bars(args.quiet)
-    try:
-        s = select(study, config, args.top, args.seeds, progress)
-    finally:
-        close()
-    print(f"re-evaluated the top {len(s.trials)} trials on seeds {s.seeds[0]}..{s.seeds[-1]}:")
+    s = None if args.again else recorded_selection(study, args.top, args.seeds)
+    if s is not None:
+        print(f"the top {len(s.trials)} trials were re-evaluated on seeds {s.seeds[0]}..{s.seeds[-1]} already "
+              f"({s.date}); reusing that selection (--again re-evaluates them):")
+    else:
+        progress, close = common.bars(args.quiet)
+        try:
+            s = select(study, config, args.top, args.seeds, progress)
+        finally:
+            close()
+        print(f"re-evaluated the top {len(s.trials)} trials on seeds {s.seeds[0]}..{s.seeds[-1]}:")
     for number, before, after in zip(s.trials, s.evolution_values, s.values):
         mark = "  <- selected" if number == s.winner else ""
         print(f"  trial {number:>4}: evolution {before:9.4g}   fresh seeds {after if after is not None else float('nan'):9.4g}{mark}")

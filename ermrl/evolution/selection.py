@@ -72,6 +72,15 @@ def load_selection(study: optuna.Study) -> Selection | None:
                         if isinstance(data[k], list) else data[k] for k in data})
 
 
+def recorded_selection(study: optuna.Study, top: int, seeds: int) -> Selection | None:
+    """The study's recorded selection when it re-evaluated exactly what ``select(study, ..., top, seeds)`` would
+    (the same top trials, as many seeds), else None: the evolution went on since, or other settings."""
+    sel = load_selection(study)
+    if sel is None or len(sel.seeds) != seeds or sel.trials != tuple(t.number for t in ranked_trials(study)[:top]):
+        return None
+    return sel
+
+
 def chosen_trial(study: optuna.Study, config: EvolveConfig, number: int | None = None) -> tuple[FrozenTrial, Phi, str]:
     """(trial, Φ, how it was chosen) of the Φ* to test: trial ``number`` when given, else the selected one,
     else the best trial."""

@@ -138,12 +138,9 @@ def reservoir_seconds(agent) -> float:
 def selection_left(p: StudyPlan, study) -> bool:
     """Whether the study's selection is still to run: none stored, or one of other trials (the evolution went on
     since) or another number of seeds."""
-    from ermrl.evolution.selection import load_selection, ranked_trials
+    from ermrl.evolution.selection import recorded_selection
 
-    sel = load_selection(study) if study is not None else None
-    if sel is None:
-        return True
-    return sel.trials != tuple(t.number for t in ranked_trials(study)[:p.select_top]) or len(sel.seeds) != p.select_seeds
+    return study is None or recorded_selection(study, p.select_top, p.select_seeds) is None
 
 
 def tests_left(p: StudyPlan, study) -> tuple[TestConfig, ...]:
