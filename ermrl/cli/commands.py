@@ -62,9 +62,8 @@ def add_parsers(sub, formatter) -> None:
     common.study_location(p)
     p.add_argument("--top", type=int, default=5, help="how many of the best trials to re-evaluate")
     p.add_argument("--seeds", type=int, default=5, help="fresh seeds per trial (2000, 2001, ...)")
-    p.add_argument("--again", action="store_true",
-                   help="re-evaluate even when the study already records a selection of these top trials on as "
-                        "many seeds (by default it is reused: a rerun, e.g. of a script, trains nothing)")
+    p.add_argument("--again", action="store_true", help="re-evaluate even when the study records a selection of "
+                   "these top trials on as many seeds (by default a rerun reuses it and trains nothing)")
     common.config_and_quiet(p)
 
     p = sub.add_parser("test", help="test phase: train Φ* on new seeds against PPO baselines",
