@@ -1,21 +1,16 @@
 """The smoke study that several test modules share: CartPoleNoVel with 1 reservoir from the registry's
 partial-observability experiment, evolved, selected and tested at the `smoke` scale with a 2-seed test budget."""
 
-import subprocess
-import sys
 from pathlib import Path
 
 from ermrl.experiments import runner
+
+from cli_runs import ermrl as cli
 
 EXPERIMENT, STUDY = "partial-observability", "cartpole-1res"
 BUDGET = runner.TestBudget(seeds=2, timesteps=4096, ermrl_lrs=(1e-4, 3e-4))
 FLAGS = ["--test-seeds", "2", "--test-timesteps", "4096", "--test-lrs", "1e-4", "3e-4"]
 RUN = ["experiment", "run", EXPERIMENT, "--only", STUDY, "--scale", "smoke", "--quiet", "--no-estimate"]
-
-
-def cli(*args) -> subprocess.CompletedProcess:
-    """``python -m ermrl.cli ARGS`` in a subprocess, its output captured as text."""
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, timeout=900)
 
 
 def evolve(folder: Path) -> Path:

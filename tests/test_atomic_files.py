@@ -17,6 +17,8 @@ import pytest
 from ermrl import storage
 from ermrl.errors import ConfigError
 
+from cli_runs import ermrl
+
 
 def test_a_staged_folder_appears_whole_or_not_at_all(tmp_path):
     out = tmp_path / "run"
@@ -130,7 +132,7 @@ def test_an_unwritable_output_is_refused_before_any_work(argv, flag, path, tmp_p
     storage.write_curves_csv(tmp_path / "run" / "curves.csv", {"PPO": (np.array([2048]), np.array([[20.0]]))},
                              {"PPO": np.array([0])})
     before = sorted(p.name for p in tmp_path.rglob("*"))
-    r = subprocess.run([sys.executable, "-m", "ermrl.cli", *argv], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    r = ermrl(*argv, cwd=tmp_path)
     message = (rf"ermrl {argv[0]}: error: {re.escape(flag)} {re.escape(path)}: cannot write in /proc "
                r"\((no such file or directory|permission denied)\); give a folder you can write\n")  # mkdir's reason
     assert r.returncode == 2 and re.fullmatch(message, r.stderr), r.stderr

@@ -61,15 +61,12 @@ def test_ppo_fitness_trains_the_evolutions_seeds():
 
 
 def test_baselines_command_stores_both_constants_with_provenance(tmp_path):
-    import subprocess
-    import sys
-
     import ermrl
+    from cli_runs import ermrl as cli
 
     table = tmp_path / "t.json"
-    r = subprocess.run([sys.executable, "-m", "ermrl.cli", "baselines", "--env", "CartPole-v1", "--timesteps", "2048",
-                        "--seeds", "1", "--random-episodes", "50", "--table", str(table), "--recompute", "--quiet"],
-                       capture_output=True, text=True, timeout=600)
+    r = cli("baselines", "--env", "CartPole-v1", "--timesteps", "2048", "--seeds", "1", "--random-episodes", "50",
+            "--table", table, "--recompute", "--quiet")
     assert r.returncode == 0, r.stderr
     saved = json.loads(table.read_text())
     random = saved["random"]["CartPole-v1"]
@@ -81,7 +78,6 @@ def test_baselines_command_stores_both_constants_with_provenance(tmp_path):
     assert "CartPole-v1: random" in r.stdout
     # without --recompute, the shipped random constant is used and only what is missing is computed
     other = tmp_path / "other.json"
-    r = subprocess.run([sys.executable, "-m", "ermrl.cli", "baselines", "--env", "CartPole-v1", "--timesteps", "2048",
-                        "--seeds", "1", "--table", str(other), "--quiet"], capture_output=True, text=True, timeout=600)
+    r = cli("baselines", "--env", "CartPole-v1", "--timesteps", "2048", "--seeds", "1", "--table", other, "--quiet")
     assert r.returncode == 0, r.stderr
     assert json.loads(other.read_text())["random"] == {} and "random agent" not in r.stdout

@@ -1,16 +1,13 @@
-"""The CLI as a user runs it: subprocesses at a tiny budget, help texts and one-line errors with exit code 2."""
+"""The CLI as a user runs it (in this process, see cli_runs.py; a real process where one matters) at a tiny budget:
+help texts and one-line errors with exit code 2."""
 
 import json
-import subprocess
-import sys
 
 import jax
 import mujoco
 import pytest
 
-
-def ermrl(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd, timeout=600)
+from cli_runs import ermrl, ermrl_process
 
 
 def test_train_writes_a_run_folder(tmp_path):
@@ -45,7 +42,7 @@ def test_train_writes_a_run_folder(tmp_path):
 
 
 def test_help_explains_every_flag():
-    top = ermrl("--help")
+    top = ermrl_process("--help")  # the interpreter's way in, ``python -m ermrl.cli``
     assert top.returncode == 0 and "train" in top.stdout
     sub = ermrl("train", "--help")
     assert sub.returncode == 0
@@ -77,9 +74,8 @@ def test_bad_input_is_one_line_and_exit_code_2(args, message, tmp_path):
 def test_a_bad_cpu_device_count_is_refused_before_any_work(tmp_path, value):
     import os
 
-    r = subprocess.run([sys.executable, "-m", "ermrl.cli", "train", "--env", "CartPole-v1", "--timesteps", "2048",
-                        "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=600,
-                       env={**os.environ, "ERMRL_CPU_DEVICES": value})
+    r = ermrl_process("train", "--env", "CartPole-v1", "--timesteps", "2048", "--out", tmp_path / "run",
+                      env={"ERMRL_CPU_DEVICES": value})  # read at import: a process of its own
     cores = os.cpu_count() or 1
     assert r.returncode == 2 and r.stderr == (
         f"ermrl train: error: ERMRL_CPU_DEVICES must be a whole number >= 1 (the CPU devices a population is sharded "

@@ -16,12 +16,9 @@ import pytest
 
 from ermrl.evolution.study import make_storage
 
+from cli_runs import ermrl as cli
+
 STUDY = "dash-tiny-study"
-
-
-def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=900)
 
 
 @pytest.fixture(scope="module")

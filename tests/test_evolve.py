@@ -24,12 +24,9 @@ from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
 from ermrl.training import Population, TrainConfig, train
 
+from cli_runs import ermrl as cli
+
 optuna.logging.set_verbosity(optuna.logging.WARNING)
-
-
-def cli(*args, cwd=None, **kw):
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=900, **kw)
 
 
 def tiny(trials, sampler="cmaes", popsize=None, space=SearchSpace(fixed_iss=1.0)):

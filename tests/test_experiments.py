@@ -2,8 +2,6 @@
 tests on an unseen env, the named experiments at smoke scale, and statistics in the test summaries."""
 
 import json
-import subprocess
-import sys
 
 import jax
 import numpy as np
@@ -18,12 +16,9 @@ from ermrl.experiments.baselines import load_table, nscore, resolve
 from ermrl.experiments.evaluation import summarize
 from ermrl.training import Population, TrainConfig, train
 
+from cli_runs import ermrl as cli
+
 optuna.logging.set_verbosity(optuna.logging.WARNING)
-
-
-def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=900)
 
 
 def test_two_env_evolution_scores_each_env_and_tests_on_a_third(tmp_path):
@@ -223,7 +218,6 @@ FAST_END_TO_END = ("partial-observability", "observed-units")
 """Experiments whose first study runs end to end in the default suite (JAX envs, seconds). The others' first
 studies (MuJoCo host envs, two-env normalized fitness: 0.5–2 min each) run with `make test-slow`; their paths are
 covered in the default suite by the plan test above and the two-env test below."""
-
 
 @pytest.mark.parametrize("name", [n if n in FAST_END_TO_END else pytest.param(n, marks=pytest.mark.slow)
                                   for n in registry.EXPERIMENTS])

@@ -2,8 +2,6 @@
 ``study.add_trial`` (no training), the CLI in a subprocess, and the points it draws checked against the trials."""
 
 import csv
-import subprocess
-import sys
 import zlib
 from pathlib import Path
 
@@ -20,12 +18,10 @@ from ermrl.evolution.study import load_study, make_sampler, open_study
 from ermrl.storage import encode_study_record
 from ermrl.training import TrainConfig
 
+from cli_runs import ermrl
+
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-
-
-def ermrl(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd, timeout=600)
 
 
 def make_study(url: str, name: str, env_ids: tuple[str, ...], k: int, n_complete: int, n_failed: int = 0,

@@ -3,8 +3,6 @@
 import argparse
 import json
 import re
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -15,6 +13,8 @@ from ermrl.cli.options import AGENT_DESTS, field_docs
 from ermrl.ppo.config import PPOConfig
 from ermrl.reservoir import ReservoirSpec
 from ermrl.training import TrainConfig
+
+from cli_runs import ermrl
 
 
 def subparser(name: str) -> argparse.ArgumentParser:
@@ -69,11 +69,6 @@ def test_config_file_sets_options_and_flags_override_it(tmp_path):
     yaml.write_text("trials: 12\nenv: [CartPoleNoVel-v1, PendulumNoVel-v1]\nnormalization: reference\n")
     args = parse(["evolve", "--config", str(yaml)])
     assert (args.trials, args.env, args.normalization) == (12, ["CartPoleNoVel-v1", "PendulumNoVel-v1"], "reference")
-
-
-def ermrl(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=600)
 
 
 def test_the_run_folder_stores_the_effective_config(tmp_path):

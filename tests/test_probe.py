@@ -11,6 +11,8 @@ from ermrl.analysis.probe import (MEMORY, MEMORYLESS, ProbeResult, collect, plot
 from ermrl.errors import ConfigError
 from ermrl.wrappers import ReservoirObservation
 
+from cli_runs import ermrl
+
 
 @pytest.fixture(scope="module")
 def rollouts():
@@ -95,18 +97,14 @@ def test_bad_inputs_raise_config_errors(rollouts):
 def test_cli_probes_the_defaults_a_given_phi_and_a_studys_phi_star(tmp_path):
     """`ermrl analyze probe`: the default Φ, the memoryless one, a --phi and a 2-reservoir study's Φ* (its best
     trial), each a row of the R² table written beside the figure; the memory rows beat the memoryless one."""
-    import subprocess
-    import sys
-
     from test_hp_map import make_study
 
     journal = str(tmp_path / "studies.log")
     study = make_study(journal, "cp-2res", ("CartPoleNoVel-v1",), 2, n_complete=4)
     best = max((t for t in study.trials if t.value is not None), key=lambda t: t.value)
     out = tmp_path / "probe.png"
-    r = subprocess.run([sys.executable, "-m", "ermrl.cli", "analyze", "probe", "--env", "CartPoleNoVel-v1",
-                        "--episodes", "120", "--phi", "0.9", "0.3", "1", "--study", "cp-2res", "--storage", journal,
-                        "--out", str(out)], capture_output=True, text=True, timeout=600)
+    r = ermrl("analyze", "probe", "--env", "CartPoleNoVel-v1", "--episodes", "120", "--phi", "0.9", "0.3", "1",
+              "--study", "cp-2res", "--storage", journal, "--out", out)
     assert r.returncode == 0, r.stderr
     assert out.is_file() and out.read_bytes().startswith(b"\x89PNG")
     rows = {line.split(" | ")[0].lstrip("| "): line for line in out.with_suffix(".md").read_text().splitlines()[2:]}
@@ -117,9 +115,6 @@ def test_cli_probes_the_defaults_a_given_phi_and_a_studys_phi_star(tmp_path):
 
 
 def test_cli_probe_errors_are_one_line(tmp_path):
-    import subprocess
-    import sys
-
     for args, message in [
         (["--env", "CartPole-v1"], "probe needs a NoVel env id whose velocities are deleted, got 'CartPole-v1'; "
                                    "use 'CartPoleNoVel-v1'"),
@@ -127,7 +122,6 @@ def test_cli_probe_errors_are_one_line(tmp_path):
         (["--env", "CartPoleNoVel-v1", "--study", "nope", "--storage", str(tmp_path / "s.log")],
          f"no study 'nope': {tmp_path / 's.log'} does not exist; run `ermrl evolve --study nope` first or pass --storage"),
     ]:
-        r = subprocess.run([sys.executable, "-m", "ermrl.cli", "analyze", "probe", *args, "--out",
-                            str(tmp_path / "p.png")], capture_output=True, text=True, timeout=600)
+        r = ermrl("analyze", "probe", *args, "--out", tmp_path / "p.png")
         assert r.returncode == 2 and r.stderr == f"ermrl analyze: error: {message}\n", r.stderr
     assert not (tmp_path / "s.log").exists() and not (tmp_path / "p.png").exists()

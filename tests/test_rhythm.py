@@ -1,8 +1,5 @@
 """ermrl.analysis.rhythm: spectra and the rhythm score, on plain signals and on real reservoirs."""
 
-import subprocess
-import sys
-
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -11,6 +8,8 @@ from ermrl import reservoir
 from ermrl.analysis.rhythm import (DRIFT_CYCLES, agent_rhythm, compare_runs, peak_cycles, plot_spectra, rhythm_score,
                                    spectrum, summed)
 from ermrl.errors import ConfigError
+
+from cli_runs import ermrl
 
 T = 1024
 STEPS = np.arange(T)
@@ -71,10 +70,6 @@ def test_plot_and_errors(tmp_path):
         spectrum(np.ones(T), dt=0)
     with pytest.raises(ConfigError, match="at least one signal"):
         plot_spectra({}, tmp_path / "empty.png")
-
-
-def ermrl(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, timeout=600)
 
 
 @pytest.fixture(scope="module")

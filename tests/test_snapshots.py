@@ -22,6 +22,9 @@ from ermrl.reservoir import ReservoirSpec
 from ermrl.training import Population, TrainConfig, Trainer, snapshots
 from ermrl.training.results import WALL_S
 
+from cli_runs import COMMAND, ermrl
+
+
 TINY = dataclasses.replace(SB3_DEFAULTS, n_steps=128, batch_size=64, n_epochs=2, hidden=(16, 16))
 
 
@@ -189,8 +192,8 @@ def test_env_groups_replay_to_the_same_future(base_id, discrete):
 
 def test_ermrl_train_killed_resumes_from_its_snapshot(tmp_path):
     """A real stop: `ermrl train --out` killed (SIGKILL) once its snapshot exists; the rerun resumes and writes
-    the same fitness as an unbroken run."""
-    args = [sys.executable, "-m", "ermrl.cli", "train", "--env", "CartPoleNoVel-v1", "--seeds", "2", "--timesteps",
+    the same fitness as an unbroken run (both of those run in this process)."""
+    args = [*COMMAND, "train", "--env", "CartPoleNoVel-v1", "--seeds", "2", "--timesteps",
             "40960", "--quiet", "--no-save-agents", "--snapshot-every", "0"]
     out, snap = tmp_path / "run", tmp_path / "run.snapshot"
     proc = subprocess.Popen(args + ["--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
@@ -201,11 +204,11 @@ def test_ermrl_train_killed_resumes_from_its_snapshot(tmp_path):
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     assert not (out / "summary.json").exists()
-    second = subprocess.run(args + ["--out", str(out)], capture_output=True, text=True, timeout=600)
+    second = ermrl(*args[len(COMMAND):], "--out", out)
     assert second.returncode == 0, second.stderr
     assert f"resumed from {snap} at iteration" in second.stdout
     assert not snap.exists()
-    unbroken = subprocess.run(args + ["--out", str(tmp_path / "unbroken")], capture_output=True, text=True, timeout=600)
+    unbroken = ermrl(*args[len(COMMAND):], "--out", tmp_path / "unbroken")
     assert unbroken.returncode == 0, unbroken.stderr
     fitness = lambda folder: json.loads((folder / "summary.json").read_text())["fitness"]
     assert fitness(out) == fitness(tmp_path / "unbroken")

@@ -3,8 +3,6 @@ reader (EventAccumulator, from the `tensorboard` package of the test extra)."""
 
 import csv
 import dataclasses
-import subprocess
-import sys
 
 import numpy as np
 import optuna
@@ -20,11 +18,9 @@ from ermrl.storage import encode_study_record
 from ermrl.training import TrainConfig
 from ermrl.training.results import WALL_S, Episodes, Results
 
+from cli_runs import ermrl
+
 optuna.logging.set_verbosity(optuna.logging.WARNING)
-
-
-def ermrl(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd, timeout=600)
 
 
 def scalars(run_dir) -> dict[str, tuple[list[int], list[float]]]:

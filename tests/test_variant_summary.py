@@ -11,6 +11,8 @@ import numpy as np
 from ermrl import storage
 from ermrl.analysis.statistics import format_ci, paired_difference, probability_of_improvement, summarize
 
+from cli_runs import ermrl
+
 SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "variant_summary.py"
 SMALL = [500.0, 480.0, 210.0, 30.0, 500.0, 420.0, 190.0, 100.0, 440.0, 230.0]
 LARGE = [100.0, None, 210.0, 50.0, 180.0, 20.0, 90.0, 100.0, 40.0, 230.0]  # seed 1001 diverged
@@ -87,9 +89,8 @@ def test_an_ermrl_train_run_is_a_variant_too(tmp_path):
     read like a test phase's (its AUC: the curve's mean over the first 300k steps), paired seed by seed with a
     test phase's ER-MRL row."""
     run = tmp_path / "sparse"
-    done = subprocess.run([sys.executable, "-m", "ermrl.cli", "train", "--seeds", "2", "--first-seed", "1000",
-                           "--timesteps", "4096", "--rc-connectivity", "0.05", "--no-save-agents", "--quiet",
-                           "--out", str(run)], capture_output=True, text=True)
+    done = ermrl("train", "--seeds", "2", "--first-seed", "1000", "--timesteps", "4096", "--rc-connectivity", "0.05",
+                 "--no-save-agents", "--quiet", "--out", run)
     assert done.returncode == 0, done.stderr
     trained = json.loads((run / "summary.json").read_text())
     scores = dict(zip(trained["seeds"], trained["fitness"]))

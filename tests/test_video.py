@@ -1,7 +1,5 @@
 """`ermrl video`: a saved agent's episodes rendered to MP4/GIF, decoded back frame by frame."""
 
-import subprocess
-import sys
 import warnings
 
 import imageio.v2 as iio
@@ -15,10 +13,9 @@ from ermrl.agent import AgentConfig
 from ermrl.analysis.video import gl_backend, write_video
 from ermrl.errors import ConfigError
 
+from cli_runs import ermrl as cli, ermrl_process
 
-def ermrl_cli(*args, env=None):
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, timeout=600,
-                          env=env)
+
 
 
 def mp4_frames(path) -> list:
@@ -48,11 +45,10 @@ def test_a_cartpole_gif_holds_every_frame(tmp_path):
 
 def test_train_saves_agents_that_the_video_command_films(tmp_path):
     run = tmp_path / "run"
-    r = ermrl_cli("train", "--env", "CartPoleNoVel-v1", "--seeds", "1", "--timesteps", "2048", "--out", str(run),
-                  "--quiet")
+    r = cli("train", "--env", "CartPoleNoVel-v1", "--seeds", "1", "--timesteps", "2048", "--out", run, "--quiet")
     assert r.returncode == 0, r.stderr
     assert [p.name for p in (run / "agents").iterdir()] == ["seed0.npz"] and "agents/" in r.stdout
-    r = ermrl_cli("video", str(run), "--max-steps", "25")
+    r = ermrl_process("video", run, "--max-steps", "25")  # pygame and GL set up in a process of their own
     assert r.returncode == 0, r.stderr
     out = run / "videos" / "seed0-env-seed0.mp4"
     assert f"wrote {out}:" in r.stdout and r.stderr == ""
@@ -62,14 +58,14 @@ def test_train_saves_agents_that_the_video_command_films(tmp_path):
 
 def test_no_saved_agents_is_a_one_line_error(tmp_path):
     run = tmp_path / "run"
-    r = ermrl_cli("train", "--env", "CartPoleNoVel-v1", "--seeds", "1", "--timesteps", "2048", "--out", str(run),
-                  "--quiet", "--no-save-agents")
+    r = cli("train", "--env", "CartPoleNoVel-v1", "--seeds", "1", "--timesteps", "2048", "--out", run, "--quiet",
+              "--no-save-agents")
     assert r.returncode == 0, r.stderr
     assert not (run / "agents").exists()
-    r = ermrl_cli("video", str(run))
+    r = cli("video", run)
     assert r.returncode == 2 and r.stderr == (f"ermrl video: error: {run} has no saved agents (agents/*.npz); "
                                               "`ermrl train` and `ermrl test` save them unless --no-save-agents\n")
-    r = ermrl_cli("video", str(tmp_path / "nope"))
+    r = cli("video", tmp_path / "nope")
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "does not exist" in r.stderr
 
 
@@ -80,7 +76,7 @@ def test_a_mujoco_episode_renders_headless(tmp_path):
         pytest.skip(str(e))
     path = write_untrained_agent(tmp_path / "run", "Swimmer-v5", agent=AgentConfig(reservoirs=1))
     out = tmp_path / "swimmer.mp4"
-    r = ermrl_cli("video", "--agent", str(path), "--max-steps", "30", "--out", str(out))
+    r = ermrl_process("video", "--agent", path, "--max-steps", "30", "--out", out)
     assert r.returncode == 0, r.stderr
     assert "31 frames at 25 fps" in r.stdout
     frames = mp4_frames(out)

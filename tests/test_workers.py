@@ -30,6 +30,8 @@ from ermrl.reservoir import ReservoirSpec
 from ermrl.storage import encode_study_record
 from ermrl.training import TrainConfig
 
+from cli_runs import ermrl
+
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 POPSIZE, TRIALS = 6, 24
@@ -294,8 +296,7 @@ def test_worker_seeds():
      "--grace-period (10 s) must be longer than --heartbeat-interval (10 s), or live trials would be failed as lost"),
 ])
 def test_bad_worker_flags(args, message, tmp_path):
-    r = subprocess.run([sys.executable, "-m", "ermrl.cli", "evolve", "--trials", "2", "--timesteps", "2048", *args],
-                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    r = ermrl("evolve", "--trials", "2", "--timesteps", "2048", *args, cwd=tmp_path)
     assert (r.returncode, r.stderr) == (2, f"ermrl evolve: error: {message}\n")
     assert not list(tmp_path.iterdir())  # nothing written
 
@@ -305,18 +306,15 @@ def test_database_passwords_are_never_printed(postgres_url, tmp_path):
     evolution's progress and hints, a missing study's error, an unreachable server's error."""
     url = postgres_url.replace("postgresql://ermrl@", "postgresql://ermrl:s3cret@")
     shown = postgres_url.replace("postgresql://ermrl@", "postgresql://ermrl:***@")
-    cli = [sys.executable, "-m", "ermrl.cli"]
-    r = subprocess.run([*cli, "evolve", "--env", "CartPoleNoVel-v1", "--units", "10", "--seeds", "1", "--timesteps",
-                        "2048", "--fixed-iss", "1.0", "--popsize", "2", "--trials", "2", "--storage", url, "--study", "p",
-                        "--quiet", "--no-estimate"], capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    r = ermrl("evolve", "--env", "CartPoleNoVel-v1", "--units", "10", "--seeds", "1", "--timesteps", "2048",
+              "--fixed-iss", "1.0", "--popsize", "2", "--trials", "2", "--storage", url, "--study", "p", "--quiet",
+              "--no-estimate", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert f"study 'p' in {shown}: 0/2 trials done" in r.stdout and f"--storage {shown}" in r.stdout
-    r2 = subprocess.run([*cli, "select", "--study", "nope", "--storage", url], capture_output=True, text=True,
-                        cwd=tmp_path, timeout=300)
+    r2 = ermrl("select", "--study", "nope", "--storage", url, cwd=tmp_path)
     assert (r2.returncode, r2.stderr) == (2, f"ermrl select: error: no study 'nope' in '{shown}'; studies there: p\n")
     dead = "postgresql://ermrl:s3cret@127.0.0.1:1/db"
-    r3 = subprocess.run([*cli, "report", "--study", "p", "--storage", dead], capture_output=True, text=True,
-                        cwd=tmp_path, timeout=300)
+    r3 = ermrl("report", "--study", "p", "--storage", dead, cwd=tmp_path)
     assert r3.returncode == 2 and r3.stderr.startswith(
         "ermrl report: error: cannot open storage 'postgresql://ermrl:***@127.0.0.1:1/db' (")
     assert not any("s3cret" in s for s in (r.stdout, r.stderr, r2.stdout, r2.stderr, r3.stdout, r3.stderr))
