@@ -2,6 +2,7 @@
 help texts and one-line errors with exit code 2."""
 
 import json
+import re
 
 import jax
 import mujoco
@@ -25,6 +26,18 @@ def test_train_writes_a_run_folder(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["fitness"]) == 2 and summary["episodes"][0] > 10
     assert (out / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
+    # the same run as a real process (how every other test here runs the CLI is checked by this one): the same
+    # output, the same fitness to the bit, the same files
+    alone = tmp_path / "alone"
+    p = ermrl_process("train", "--env", "CartPoleNoVel-v1", "--seeds", "2", "--timesteps", "2048", "--out", alone,
+                      "--quiet")
+    speed = re.compile(r" \| [\d,]+ agent-steps/s, compile [\d.]+s, train [\d.]+s$", re.M)  # this run's speed
+    assert speed.search(r.stdout) and speed.search(p.stdout)
+    assert (p.returncode, speed.sub("", p.stdout.replace(str(alone), str(out))), p.stderr) == (
+        0, speed.sub("", r.stdout), r.stderr)
+    assert json.loads((alone / "summary.json").read_text())["fitness"] == summary["fitness"]
+    assert (alone / "episodes.csv").read_bytes() == (out / "episodes.csv").read_bytes()
+    assert sorted(f.name for f in alone.rglob("*")) == sorted(f.name for f in out.rglob("*"))
 
     plain = tmp_path / "plain"
     r = ermrl("train", "--env", "CartPoleNoVel-v1", "--no-reservoir", "--seeds", "1", "--first-seed", "1000",
