@@ -5,8 +5,6 @@ once per session (smoke_study.py)."""
 import dataclasses
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +16,7 @@ from ermrl.cli import main
 from ermrl.evolution.study import load_study
 from ermrl.experiments import checkpoints, registry, runner
 from ermrl.experiments import evaluation
+from cli_runs import script
 from smoke_study import BUDGET, EXPERIMENT, RUN, STUDY, cli
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -258,8 +257,8 @@ def test_budgets_override_every_test_phase_and_the_estimate_but_no_study(scale, 
 def test_the_scores_so_far_of_a_stopped_test_phase(evolved, interrupted, tmp_path):
     """benchmarks/partial_test_summary.py reads the kept ER-MRL model (2 learning rates × 2 seeds) with the scores
     that the uninterrupted test phase wrote; a folder that is not a partial one, or holds no model, is refused."""
-    script = [sys.executable, str(Path(__file__).resolve().parent.parent / "benchmarks" / "partial_test_summary.py")]
-    r = subprocess.run([*script, str(interrupted / STUDY / "test.partial")], capture_output=True, text=True)
+    summary = Path(__file__).resolve().parent.parent / "benchmarks" / "partial_test_summary.py"
+    r = script(summary, interrupted / STUDY / "test.partial")
     assert r.returncode == 0, r.stderr
     (line,) = [x for x in r.stdout.splitlines() if "(`ermrl`)" in x]
     rows = json.loads((evolved / STUDY / "test" / "summary.json").read_text())
@@ -270,7 +269,7 @@ def test_the_scores_so_far_of_a_stopped_test_phase(evolved, interrupted, tmp_pat
     (tmp_path / "empty.partial").mkdir()
     for folder, message in ((tmp_path / "empty.partial", "holds no kept model or snapshot yet (*.npz, *.snapshot)"),
                             (tmp_path / "missing.partial", "is not a folder; give an unfinished test phase's")):
-        r = subprocess.run([*script, str(folder)], capture_output=True, text=True)
+        r = script(summary, folder)
         assert r.returncode == 2 and message in r.stderr, r.stderr
 
 

@@ -3,8 +3,6 @@ reward (−16..0) and torque (±2) enter unnormalized, and the saturated state l
 Pendulum episodes, real reservoirs."""
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,12 +10,13 @@ import numpy as np
 from ermrl.analysis.probe import MEMORY, collect, reservoir_states
 from ermrl.reservoir import ReservoirSpec
 
+from cli_runs import script
+
 SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "input_saturation.py"
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, str(SCRIPT), *map(str, args)], capture_output=True, text=True,
-                          timeout=600)
+    return script(SCRIPT, *args)
 
 
 def test_the_spec_reaches_the_probes_reservoir():

@@ -1,8 +1,6 @@
 """benchmarks/reservoir_count_summary.py (C3): the 2-reservoir test phase against the 1-reservoir `ermrl train` parts."""
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,13 +9,15 @@ from ermrl.analysis.statistics import format_ci, paired_difference, probability_
 from ermrl.experiments import checkpoints
 from ermrl.training.results import Episodes, Results
 
+from cli_runs import script
+
 SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "reservoir_count_summary.py"
 TWO = [150.0, 200.0, 210.0, -30.0, 180.0, 220.0, 190.0, 100.0, 240.0, 230.0]
 ONE = [100.0, 120.0, 210.0, -50.0, 180.0, 20.0, 90.0, 100.0, 40.0, 230.0]
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, str(SCRIPT), *map(str, args)], capture_output=True, text=True)
+    return script(SCRIPT, *args)
 
 
 def _write(tmp_path, ermrl_rows):

@@ -7,7 +7,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -22,7 +21,7 @@ from ermrl.reservoir import ReservoirSpec
 from ermrl.training import Population, TrainConfig, Trainer, snapshots
 from ermrl.training.results import WALL_S
 
-from cli_runs import COMMAND, ermrl
+from cli_runs import COMMAND, ermrl, script
 
 
 TINY = dataclasses.replace(SB3_DEFAULTS, n_steps=128, batch_size=64, n_epochs=2, hidden=(16, 16))
@@ -225,8 +224,7 @@ def test_the_scores_so_far_of_a_model_in_training(tmp_path):
         trainer.run(population, stop_after(5), snapshot=partial / "ermrl.snapshot", snapshot_every_s=0)
     done = 4 * TINY.buffer_size
     so_far = [np.mean(e.ret[e.timestep <= done][-10:]) for e in unbroken.episodes]
-    script = Path(__file__).resolve().parent.parent / "benchmarks" / "partial_test_summary.py"
-    r = subprocess.run([sys.executable, str(script), str(partial)], capture_output=True, text=True)
+    r = script(Path(__file__).resolve().parent.parent / "benchmarks" / "partial_test_summary.py", partial)
     assert r.returncode == 0, r.stderr
     row = r.stdout.splitlines()[2]
     assert row == (f"| `ermrl` (in training) | 2 | 0, 1 | {done:,} of {10 * TINY.buffer_size:,} | "

@@ -1,14 +1,14 @@
 """benchmarks/statistics_cost.py: times ermrl's statistics against rliable's own, after checking they are equal."""
 
-import subprocess
-import sys
 from pathlib import Path
+
+from cli_runs import script
 
 SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "statistics_cost.py"
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, str(SCRIPT), *args], capture_output=True, text=True)
+    return script(SCRIPT, *args)
 
 
 def test_it_prints_both_medians_and_their_ratio():

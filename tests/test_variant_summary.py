@@ -2,8 +2,6 @@
 
 import importlib.util
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +9,7 @@ import numpy as np
 from ermrl import storage
 from ermrl.analysis.statistics import format_ci, paired_difference, probability_of_improvement, summarize
 
-from cli_runs import ermrl
+from cli_runs import ermrl, script
 
 SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "variant_summary.py"
 SMALL = [500.0, 480.0, 210.0, 30.0, 500.0, 420.0, 190.0, 100.0, 440.0, 230.0]
@@ -20,7 +18,7 @@ PPO = [40.0, 35.0, 52.0, 28.0, 44.0, 39.0, 31.0, 47.0, 36.0, 41.0]
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, str(SCRIPT), *map(str, args)], capture_output=True, text=True)
+    return script(SCRIPT, *args)
 
 
 def _summary(folder: Path, *ermrl_rows) -> Path:
