@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +20,8 @@ import pytest
 
 from bad_input_cases import CASES
 from ermrl.cli import main
+
+from cli_runs import ermrl_process as ermrl
 
 CORES = os.cpu_count() or 1
 
@@ -161,11 +161,6 @@ def test_debug_keeps_the_traceback_and_the_exit_code(work, capsys):
         lines = err.splitlines()
         assert code == 2 and lines[0] == "Traceback (most recent call last):" and lines[-1] == line, err
         assert lines[-2] == "ermrl.errors.ConfigError: " + line.split(": error: ", 1)[1]
-
-
-def ermrl(*args, env=None, cwd=None):
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=300, env={**os.environ, **(env or {})})
 
 
 def test_as_a_subprocess_with_a_bad_cpu_device_count(work):

@@ -14,7 +14,6 @@ import random
 import signal
 import sqlite3
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -24,6 +23,8 @@ import pytest
 from optuna.trial import TrialState
 
 from ermrl import agent_files, storage
+
+from cli_runs import COMMAND
 
 POPSIZE = 4
 TINY = ["--seeds", "1", "--timesteps", "512", "--units", "10"]
@@ -37,7 +38,7 @@ WATCHDOG_S = 600
 
 
 def cli(*args) -> list[str]:
-    return [sys.executable, "-m", "ermrl.cli", *args]
+    return [*COMMAND, *args]
 
 
 def counts(db: Path) -> dict[str, tuple[int, int]] | None:

@@ -16,7 +16,7 @@ import pytest
 
 from ermrl.evolution.study import make_storage
 
-from cli_runs import ermrl as cli
+from cli_runs import COMMAND, ermrl as cli
 
 STUDY = "dash-tiny-study"
 
@@ -39,7 +39,7 @@ class Dashboard:
     """`ermrl dashboard ARGS --port 0` in a subprocess; ``url`` is the study page it prints once it listens."""
 
     def __init__(self, *args, cwd):
-        self.proc = subprocess.Popen([sys.executable, "-m", "ermrl.cli", "dashboard", *args, "--port", "0"],
+        self.proc = subprocess.Popen([*COMMAND, "dashboard", *args, "--port", "0"],
                                      cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         lines = queue.Queue()
         threading.Thread(target=lambda: [lines.put(line) for line in self.proc.stdout] + [lines.put("")],

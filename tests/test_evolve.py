@@ -5,7 +5,6 @@ import json
 import shutil
 import signal
 import subprocess
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -24,7 +23,7 @@ from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
 from ermrl.training import Population, TrainConfig, train
 
-from cli_runs import ermrl as cli
+from cli_runs import COMMAND, ermrl as cli
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -112,7 +111,7 @@ def test_extreme_but_valid_phi_stays_finite():
 def test_resume_after_kill_loses_and_duplicates_nothing(tmp_path):
     args = ["evolve", "--env", "CartPoleNoVel-v1", "--trials", "12", "--seeds", "2", "--timesteps", "61440",
             "--fixed-iss", "1.0", "--study", "r", "--out", str(tmp_path), "--quiet", "--no-estimate"]
-    proc = subprocess.Popen([sys.executable, "-m", "ermrl.cli", *args], stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen([*COMMAND, *args], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     url = f"sqlite:///{tmp_path}/study.db"
     first, seen = [], []

@@ -6,13 +6,14 @@ import math
 import os
 import re
 import subprocess
-import sys
 
 from rich.console import Console
 
 from ermrl.cli.progress import EvolutionBar, TrainingBar
 from ermrl.evolution.evolve import GenerationProgress
 from ermrl.training import Progress
+
+from cli_runs import COMMAND
 
 HMS = r"\d+:\d\d:\d\d"
 TRAIN_LINE = re.compile(rf"(?P<label>.+): (?P<done>[\d,]+)k/(?P<total>[\d,]+)k steps \((?P<pct>\d+)%\) \| "
@@ -24,7 +25,7 @@ GEN_LINE = re.compile(rf"gen (?P<gen>\d+) \| (?P<completed>\d+)/(?P<trials>\d+) 
 def run(*args, cwd, merged=False):
     """The CLI with its output piped, stdout block-buffered as Python makes it by default for a pipe."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
-    return subprocess.run([sys.executable, "-m", "ermrl.cli", *args], cwd=cwd, stdout=subprocess.PIPE,
+    return subprocess.run([*COMMAND, *args], cwd=cwd, stdout=subprocess.PIPE,
                           stderr=subprocess.STDOUT if merged else subprocess.PIPE, text=True, timeout=900, env=env)
 
 

@@ -10,7 +10,6 @@ import collections
 import pickle
 import signal
 import subprocess
-import sys
 import time
 import warnings
 
@@ -30,7 +29,7 @@ from ermrl.reservoir import ReservoirSpec
 from ermrl.storage import encode_study_record
 from ermrl.training import TrainConfig
 
-from cli_runs import ermrl
+from cli_runs import COMMAND, ermrl
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
@@ -46,7 +45,7 @@ def start_worker(url, study, index, folder, timesteps=2048, batch=2, grace=3):
             "--worker-index", str(index), "--heartbeat-interval", "1", "--grace-period", str(grace),
             "--storage", url, "--study", study, "--quiet", "--no-estimate", "--debug"]
     out, err = open(folder / f"worker{index}.out", "w"), open(folder / f"worker{index}.err", "w")
-    return subprocess.Popen([sys.executable, "-m", "ermrl.cli", *args], stdout=out, stderr=err, cwd=folder)
+    return subprocess.Popen([*COMMAND, *args], stdout=out, stderr=err, cwd=folder)
 
 
 def finish(procs, folder, timeout=600):
