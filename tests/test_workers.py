@@ -37,13 +37,27 @@ POPSIZE, TRIALS = 6, 24
 LOST = "worker lost (no heartbeat for 3 s)"
 
 
+def evolve_args(timesteps=2048, batch=2) -> list[str]:
+    """The workers' evolution: CartPoleNoVel, 10 units, 1 seed, ``batch`` trials trained at a time."""
+    return ["evolve", "--env", "CartPoleNoVel-v1", "--units", "10", "--seeds", "1", "--timesteps", str(timesteps),
+            "--fixed-iss", "1.0", "--popsize", str(POPSIZE), "--batch", str(batch), "--quiet", "--no-estimate"]
+
+
+@pytest.fixture(scope="module")
+def compiled_once(tmp_path_factory):
+    """The workers' population program compiled once, in this process, into the run's persistent compilation cache
+    (tests/conftest.py), before a test starts several workers at once: each would otherwise compile it at the same
+    moment. Changes when they start training, not what they do."""
+    folder = tmp_path_factory.mktemp("compiled-once")
+    r = ermrl(*evolve_args(), "--trials", "2", "--storage", f"sqlite:///{folder}/s.db", "--study", "warm", cwd=folder)
+    assert r.returncode == 0, r.stderr
+
+
 def start_worker(url, study, index, folder, timesteps=2048, batch=2, grace=3):
     """One `ermrl evolve` process. A short grace period (3 s) makes lost workers quick to see; tests where no worker
     is lost take a long one, so that a worker starved of CPU by the other tests never looks lost."""
-    args = ["evolve", "--env", "CartPoleNoVel-v1", "--units", "10", "--seeds", "1", "--timesteps", str(timesteps),
-            "--fixed-iss", "1.0", "--popsize", str(POPSIZE), "--trials", str(TRIALS), "--batch", str(batch),
-            "--worker-index", str(index), "--heartbeat-interval", "1", "--grace-period", str(grace),
-            "--storage", url, "--study", study, "--quiet", "--no-estimate", "--debug"]
+    args = [*evolve_args(timesteps, batch), "--trials", str(TRIALS), "--worker-index", str(index),
+            "--heartbeat-interval", "1", "--grace-period", str(grace), "--storage", url, "--study", study, "--debug"]
     out, err = open(folder / f"worker{index}.out", "w"), open(folder / f"worker{index}.err", "w")
     return subprocess.Popen([*COMMAND, *args], stdout=out, stderr=err, cwd=folder)
 
@@ -81,7 +95,7 @@ def check_study(study):
     return trials, per_generation
 
 
-def test_three_workers_share_one_study(postgres_url, tmp_path):
+def test_three_workers_share_one_study(postgres_url, tmp_path, compiled_once):
     procs = {i: start_worker(postgres_url, "three", i, tmp_path, grace=60) for i in range(3)}
     results = finish(procs, tmp_path)
     for i, (code, out, err) in results.items():
@@ -144,7 +158,7 @@ def _opened(url, name):
         return None
 
 
-def test_killed_and_frozen_workers_are_replaced(postgres_url, tmp_path):
+def test_killed_and_frozen_workers_are_replaced(postgres_url, tmp_path, compiled_once):
     """The first of three workers seen training past the startup generation is killed (SIGKILL): on this machine
     its process is seen gone, and its trials are failed ("interrupted") and redone. The next one seen training is
     frozen (SIGSTOP), like a machine cut off: its heartbeats stop, the survivor fails its trials after the grace
@@ -211,7 +225,7 @@ def test_ctrl_c_fails_the_workers_own_trials(tmp_path):
     assert [t.state for t in study.trials] == [TrialState.FAIL] * 2 + [TrialState.COMPLETE] * 4
 
 
-def test_sigterm_fails_the_workers_own_trials(postgres_url, tmp_path):
+def test_sigterm_fails_the_workers_own_trials(postgres_url, tmp_path, compiled_once):
     """SIGTERM (slurm's time limit, scancel) stops a worker like Ctrl-C: its trials fail ("interrupted"), exit 143.
     (PostgreSQL: on SQLite a worker frozen inside a write would lock this test's reads out.)"""
     url = postgres_url
