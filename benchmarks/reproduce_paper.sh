@@ -298,6 +298,19 @@ step_pendulum_paper_500u() {  # the Pendulum target's next test (C14's variant a
   # generation of 18 agents), ≈ 43 min of evolution on one H200; resumes by whole generations. Started 2026-11-26
   run reservoir-sizes paper --only pendulum-500u "${TEST10[@]}"
 }
+step_pendulum_paper_500u_interim() {  # a diagnostic of step `pendulum_paper_500u` ahead of its selection: the best Φ
+  # after 150 of its 900 trials (trial 55), trained on the test seeds 1000-1009 × 1M at lr 1e-4 (≈ 13 min here) and
+  # compared with the `medium` 500-unit Φ* and the default Φ at 500 units (step `sizes_medium`)
+  local d=docs/data/reservoir-sizes-paper/interim-trial55 m=docs/data/reservoir-sizes-medium
+  [ -f "$d/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 --sr 0.06239118054509163 \
+      --lr 0.11866375803947449 --iss 1.0 --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 \
+      --no-save-agents --quiet --out "$d"
+  .venv/bin/python benchmarks/variant_summary.py "paper-scale best after 150 trials=$d/summary.json" \
+      "medium Φ*=$m/pendulum-500u/test/summary.json" "default Φ=$m/default-phi-500u/summary.json" \
+      --compare "paper-scale best after 150 trials" "medium Φ*" --compare "paper-scale best after 150 trials" "default Φ" \
+      --title "PendulumNoVel, 500 units: the paper-scale study's best Φ so far (trial 55), tested 10 × 1M at lr 1e-4" \
+      --figure "$d/comparison.png" | tee "$d/comparison.md"
+}
 step_pendulum_500u_lr1e4() {  # the Pendulum target, as `pendulum_lr1e4` at 500 units: C14's 500-unit `medium`
   # study evolved and selected at lr 1e-4, the paper's rate for the masked tasks, instead of the reference script's
   # 3e-4 (60 trials × 3 seeds × 300k, top 5 on 5 seeds), its Φ* trained on the test seeds (1000-1009 × 1M) at 1e-4
@@ -451,7 +464,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_500u_lr1e4 other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
