@@ -117,11 +117,11 @@ def per_test(procs: dict[int, dict]) -> dict[str, list[float]]:
     """{test id: [wall s, compile s, tracing + lowering s, programs]}: each compile event of a pytest worker, or of
     a process that a worker started (its CLI runs), is put to the test that ran in that worker at the time."""
     table: dict[str, list[float]] = {}
-    for pid, proc in procs.items():
+    for proc in procs.values():
         for nodeid, start, end in proc["tests"]:
             row = table.setdefault(nodeid, [0.0, 0.0, 0.0, 0])
             row[0] += end - start
-    for pid, proc in procs.items():
+    for proc in procs.values():
         worker = proc if proc["tests"] else procs.get(proc["ppid"])
         if not worker or not worker["tests"]:
             continue
