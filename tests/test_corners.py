@@ -1,9 +1,9 @@
 """The corners of the search space (sr ∈ {1e-4, 1e2}, lr ∈ {1e-2, 1}, iss ∈ {0.1, 10}) and what an evolution does
 with results that are not numbers.
 
-- every corner trains, as one population, to a finite fitness on a JAX env (CartPoleNoVel-v1, through
-  ``evolve`` with the corners enqueued, so that the tell path records them) and on a host env
-  (LunarLanderNoVel-v3, Gymnasium's Box2D);
+- every corner trains to a finite fitness on a JAX env (CartPoleNoVel-v1, through ``evolve`` with the corners
+  enqueued, so that the tell path records them) and, as one population, on a host env (LunarLanderNoVel-v3,
+  Gymnasium's Box2D);
 - a real Gymnasium env that misbehaves (NaN rewards for some seeds, episodes longer than the budget for
   others) on the host backend: the worker keeps going, and each trial is told either a finite fitness or a
   failure with its reason (user attribute ``failure``);
@@ -54,10 +54,11 @@ def test_a_reservoir_stays_finite_and_bounded_at_every_corner():
 
 
 def test_every_corner_trains_to_a_finite_fitness_on_a_jax_env_through_evolve():
-    """One generation of exactly the 8 corners (enqueued), × 2 seeds, as one population on CartPoleNoVel-v1 at
-    2 iterations (the second rollout uses the updated policy): every trial is told a finite fitness."""
+    """The 8 corners (enqueued, so taken in order), in four batches of 2 × 2 seeds (a population size that other
+    tests compile too), on CartPoleNoVel-v1 at 2 iterations (the second rollout uses the updated policy): every trial
+    is told a finite fitness."""
     config = EvolveConfig(train=TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=4096), space=SPACE,
-                          trials=8, seeds=2, sampler="random", popsize=8)
+                          trials=8, seeds=2, sampler="random", popsize=2)
     study = optuna.create_study(direction="maximize", sampler=optuna.samplers.RandomSampler(seed=0))
     for c in CORNERS:
         study.enqueue_trial(c)

@@ -27,9 +27,11 @@ from ermrl import agent_files, storage
 from cli_runs import COMMAND
 
 POPSIZE = 4
-TINY = ["--seeds", "1", "--timesteps", "512", "--units", "10"]
-"""One PPO update of 512 steps per agent, 10 units: a generation trains in about a second once compiled."""
-EVOLVE = ["evolve", "--env", "CartPole-v1", *TINY, "--popsize", str(POPSIZE), "--study", "k", "--no-estimate",
+TINY = ["--seeds", "1", "--timesteps", "512"]
+"""One PPO iteration per agent: SB3 stops at the first whole rollout past --timesteps, so 512 trains one rollout of
+its 2048 steps (``PPOConfig.iterations``). The default reservoir, whose programs many tests compile: a generation
+trains in about a second once compiled."""
+EVOLVE = ["evolve", "--env", "CartPoleNoVel-v1", *TINY, "--popsize", str(POPSIZE), "--study", "k", "--no-estimate",
           "--quiet"]
 WORKER = ["--heartbeat-interval", "1", "--grace-period", "3"]
 """The workers' heartbeats: a trial whose worker's process is not seen gone (it had not recorded itself yet) is
@@ -241,7 +243,8 @@ def test_an_evolution_on_a_journal_with_a_torn_tail_resumes(tmp_path):
 
 
 TEST = ["test", "--study", "k", "--out", "run", "--seeds", "2", "--timesteps", "512", "--quiet"]
-"""The test phase of the killed evolution: ER-MRL and PPO, 2 seeds each, at a tiny budget."""
+"""The test phase of the killed evolution: ER-MRL and PPO on the same and on the full observation, 2 seeds each, at
+a tiny budget."""
 
 
 def check_test_phase(folder: Path) -> bool:
@@ -249,14 +252,14 @@ def check_test_phase(folder: Path) -> bool:
     if not folder.exists():
         return False
     rows = storage.read_json(folder / "summary.json")
-    assert [r["model"].split(" (")[0] for r in rows] == ["ER-MRL", "PPO"]
-    assert (folder / "summary.csv").read_text().count("\n") == 3
+    assert [r["model"].split(" (")[0] for r in rows] == ["ER-MRL", "PPO", "PPO"]
+    assert (folder / "summary.csv").read_text().count("\n") == 4
     curves = storage.read_curves_csv(folder / "curves.csv")
-    assert sorted(len(v) for _, v in curves.values()) == [2, 2]
+    assert sorted(len(v) for _, v in curves.values()) == [2, 2, 2]
     assert storage.read_json(folder / "test_config.json")["seeds"] == 2
     assert _whole_png(folder / "test_phase.png") and (folder / "test_phase.svg").read_text().rstrip().endswith("</svg>")
     agents = agent_files.find_agents(folder)
-    assert len(agents) == 4 and all(agent_files.read_agent(a)[0]["seed"] in (1000, 1001) for a in agents)
+    assert len(agents) == 6 and all(agent_files.read_agent(a)[0]["seed"] in (1000, 1001) for a in agents)
     return True
 
 
@@ -295,8 +298,7 @@ def test_kill_9_while_a_test_phase_writes_leaves_it_absent_then_report_and_plot_
     assert _whole_png(folder / "curves.png")
 
 
-TRAIN = ["train", "--env", "CartPole-v1", "--seeds", "2", "--timesteps", "1024", "--units", "10", "--out", "run",
-         "--quiet"]
+TRAIN = ["train", "--env", "CartPoleNoVel-v1", "--seeds", "2", "--timesteps", "1024", "--out", "run", "--quiet"]
 
 
 def check_train_run(folder: Path) -> bool:
@@ -322,9 +324,9 @@ def random_points(n: int, seed: int, start_s: tuple[float, float]) -> list[KillP
 
 def test_train_killed_or_refused_a_write_while_writing_leaves_no_run_folder(tmp_path):
     """Killed while it writes its run folder: no run folder, only its hidden staging folder. Rerun with a file size
-    limit (RLIMIT_FSIZE, 20 kB) standing for a full disk: the learning-curve PNG, written after the CSVs, summary
-    and agents, is refused (EFBIG); one line, exit 1, no run folder, and no staging folder (the killed one's
-    removed too). A rerun without the limit writes it whole."""
+    limit (RLIMIT_FSIZE, 20 kB) standing for a full disk: the first file over it (an agent file, ≈ 90 kB) is refused
+    (EFBIG); one line, exit 1, no run folder, and no staging folder (the killed one's removed too). A rerun without
+    the limit writes it whole."""
     import resource
 
     run, point = tmp_path / "run", KillPoint("write", 0.0)

@@ -66,22 +66,23 @@ def test_budget_flags_reach_the_test_phase_and_a_rerun_with_others_redoes_only_t
     record = load_study(runner.default_storage(evolved), f"{EXPERIMENT}-smoke-{STUDY}").user_attrs["ermrl"]
     assert (record["seeds"], record["train"]["total_timesteps"]) == (1, 2048)  # the study's own budget, untouched
 
-    # the stopped run's rerun with 3 test seeds, given in a config file: the evolution and selection are kept, the
-    # finished model (trained for 2 seeds) is discarded, and the test phase is written for 3 seeds
+    # the stopped run's rerun with 1 test seed, given in a config file: the evolution and selection are kept, the
+    # finished model (trained for 2 seeds) is discarded, and the test phase is written for 1 seed (populations of at
+    # most 2 agents, whose programs other tests compile too)
     folder = tmp_path / "run"
     shutil.copytree(interrupted, folder)
     before = trials(folder)
     toml = tmp_path / "budgets.toml"
-    toml.write_text("test-seeds = 3\ntest-timesteps = 4096\ntest-lrs = [1e-4, 3e-4]\n")
+    toml.write_text("test-seeds = 1\ntest-timesteps = 4096\ntest-lrs = [1e-4, 3e-4]\n")
     r = cli(*RUN, "--out", str(folder), "--config", str(toml))
     assert r.returncode == 0, r.stderr
-    assert "test on CartPoleNoVel-v1: 3 seeds × 4,096 steps, ER-MRL at lr 0.0001, 0.0003" in r.stdout
+    assert "test on CartPoleNoVel-v1: 1 seeds × 4,096 steps, ER-MRL at lr 0.0001, 0.0003" in r.stdout
     assert "test on CartPoleNoVel-v1: discarded the models of an unfinished test phase with other settings" in r.stdout
     assert "from an earlier run" not in r.stdout
     assert trials(folder) == before
     config = json.loads((folder / STUDY / "test" / "test_config.json").read_text())
-    assert (config["seeds"], config["timesteps"], config["ermrl_lrs"]) == (3, 4096, [1e-4, 3e-4])
-    assert [r["n_seeds"] for r in json.loads((folder / STUDY / "test" / "summary.json").read_text())] == [3] * 4
+    assert (config["seeds"], config["timesteps"], config["ermrl_lrs"]) == (1, 4096, [1e-4, 3e-4])
+    assert [r["n_seeds"] for r in json.loads((folder / STUDY / "test" / "summary.json").read_text())] == [1] * 4
     assert not (folder / STUDY / "test.partial").exists()
 
 

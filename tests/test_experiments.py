@@ -41,14 +41,16 @@ def test_two_env_evolution_scores_each_env_and_tests_on_a_third(tmp_path):
         assert t.value == pytest.approx(np.mean(expected))
         assert t.user_attrs["env_scores"]["CartPoleNoVel-v1"] > 0 > t.user_attrs["env_scores"]["PendulumNoVel-v1"]
 
-    r = cli("test", "--study", "g", "--out", str(tmp_path), "--env", "MountainCar-v0", "--seeds", "1",
+    # the third env: CartPole-v1, outside the evolution, with another input size and no masked dims (so no
+    # full-observation baseline); its models are those that the tests on CartPole-v1 compile
+    r = cli("test", "--study", "g", "--out", str(tmp_path), "--env", "CartPole-v1", "--seeds", "1",
             "--timesteps", "2048", "--quiet")
     assert r.returncode == 0, r.stderr
-    rows = json.loads((tmp_path / "test-MountainCar-v0" / "summary.json").read_text())
+    rows = json.loads((tmp_path / "test-CartPole-v1" / "summary.json").read_text())
     assert [row["kind"] for row in rows] == ["ER-MRL", "PPO"]
-    assert all(row["env_id"] == "MountainCar-v0" and row["evolved_on"] == envs for row in rows)
-    assert "evolved on CartPoleNoVel-v1, PendulumNoVel-v1; tested on MountainCar-v0" in r.stdout
-    assert (tmp_path / "test-MountainCar-v0" / "test_phase.png").stat().st_size > 0
+    assert all(row["env_id"] == "CartPole-v1" and row["evolved_on"] == envs for row in rows)
+    assert "evolved on CartPoleNoVel-v1, PendulumNoVel-v1; tested on CartPole-v1" in r.stdout
+    assert (tmp_path / "test-CartPole-v1" / "test_phase.png").stat().st_size > 0
 
 
 def test_evolution_refuses_constants_where_ppo_does_not_beat_random(tmp_path):

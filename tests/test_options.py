@@ -72,10 +72,12 @@ def test_config_file_sets_options_and_flags_override_it(tmp_path):
 
 
 def test_the_run_folder_stores_the_effective_config(tmp_path):
+    """The flag (30) beats the file (20) and the default (100). --no-reservoir trains plain PPO, whose program the
+    units do not enter: the one that every CartPoleNoVel test phase compiles for its PPO baseline."""
     toml = tmp_path / "run.toml"
     toml.write_text("units = 20\nseeds = 1\ntimesteps = 2048\n")
     out = tmp_path / "run"
-    r = ermrl("train", "--config", str(toml), "--units", "30", "--out", str(out), "--quiet")
+    r = ermrl("train", "--config", str(toml), "--units", "30", "--no-reservoir", "--out", str(out), "--quiet")
     assert r.returncode == 0, r.stderr
     config = json.loads((out / "config.json").read_text())
     assert config["train"]["agent"]["spec"]["units"] == 30 and config["train"]["total_timesteps"] == 2048

@@ -24,7 +24,8 @@ from ermrl.training.results import WALL_S
 from cli_runs import COMMAND, ermrl, script
 
 
-TINY = dataclasses.replace(SB3_DEFAULTS, n_steps=128, batch_size=64, n_epochs=2, hidden=(16, 16))
+TINY = dataclasses.replace(SB3_DEFAULTS, n_steps=128, batch_size=64, n_epochs=1, hidden=(16, 16))
+"""test_host.py's small PPO: a host agent of 2 seeds here is one that its every-listed-env test compiles."""
 
 
 class Stop(Exception):
@@ -64,18 +65,19 @@ def _leaves(tree):
     return jax.tree.leaves(tree)
 
 
-CASES = [
-    pytest.param("CartPoleNoVel-v1", "jax", 0, 1, id="cartpole-jax"),
-    pytest.param("LunarLanderNoVel-v3", "host", 0, 2, id="lunarlander-in-process"),
-    pytest.param("Swimmer-v5", "host", 2, 1, id="swimmer-2-workers"),
+CASES = [  # 3 seeds: a population padded (on 2 devices) and resumed with its padding. The JAX case at SB3's PPO (the
+    # programs of the default CartPoleNoVel agent, which many tests compile); the 2-worker case at 2 seeds (TINY)
+    pytest.param("CartPoleNoVel-v1", "jax", 0, 1, SB3_DEFAULTS, [3, 4, 5], id="cartpole-jax"),
+    pytest.param("LunarLanderNoVel-v3", "host", 0, 2, TINY, [3, 4, 5], id="lunarlander-in-process"),
+    pytest.param("Swimmer-v5", "host", 2, 1, TINY, [3, 4], id="swimmer-2-workers"),
 ]
 
 
-@pytest.mark.parametrize("env_id,backend,workers,reservoirs", CASES)
-def test_a_stopped_run_resumes_to_the_same_results(tmp_path, env_id, backend, workers, reservoirs):
-    config = TrainConfig(env_id=env_id, total_timesteps=10 * TINY.buffer_size, agent=AgentConfig(reservoirs=reservoirs),
-                         ppo=TINY, backend=backend, env_workers=workers)
-    population = Population.grid(Phi(0.9, 0.3, 1.0), [3, 4, 5], 3e-4, reservoirs)
+@pytest.mark.parametrize("env_id,backend,workers,reservoirs,ppo,seeds", CASES)
+def test_a_stopped_run_resumes_to_the_same_results(tmp_path, env_id, backend, workers, reservoirs, ppo, seeds):
+    config = TrainConfig(env_id=env_id, total_timesteps=10 * ppo.buffer_size, agent=AgentConfig(reservoirs=reservoirs),
+                         ppo=ppo, backend=backend, env_workers=workers)
+    population = Population.grid(Phi(0.9, 0.3, 1.0), seeds, 3e-4, reservoirs)
     trainer = Trainer(config)  # one compile for the three runs (a fresh process: the test below)
     unbroken = trainer.run(population)
 
@@ -93,12 +95,14 @@ def test_a_stopped_run_resumes_to_the_same_results(tmp_path, env_id, backend, wo
 def test_a_snapshot_holds_no_reservoir_weights_and_an_older_one_with_them_still_resumes(tmp_path):
     """The reservoirs' weights are fixed and drawn again from the seeds and Φ on resume, so a snapshot leaves them
     out (at 1000 units they were 4 MB an agent, 57 MB for a 10-agent test model); a snapshot written with them,
-    as before, resumes to the same results too."""
+    as before, resumes to the same results too. The agent of test_saved_agent.py's PendulumNoVel case (its
+    programs): no other leaf ends in the reservoirs' (40, 40) or (40, 4) (inputs: 2 observed, 1 action, the
+    reward; the policy sees 2 × 30 observed units + the 4 inputs, 64)."""
     import jax
 
-    units = 120
-    config = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=6 * TINY.buffer_size, ppo=TINY,
-                         agent=AgentConfig(reservoirs=2, spec=ReservoirSpec(units=units)))
+    units = 40
+    agent = AgentConfig(reservoirs=2, spec=ReservoirSpec(units=units), skip_connection=True, observed_units=30)
+    config = TrainConfig(env_id="PendulumNoVel-v1", total_timesteps=6 * SB3_DEFAULTS.buffer_size, agent=agent)
     population = Population.grid(Phi(0.9, 0.3, 1.0), [3, 4], 3e-4, 2)
     trainer = Trainer(config)
     unbroken = trainer.run(population)
@@ -135,7 +139,7 @@ def test_a_snapshot_holds_no_reservoir_weights_and_an_older_one_with_them_still_
 
 
 def test_a_snapshot_of_another_population_is_not_used(tmp_path):
-    config = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=4 * TINY.buffer_size, ppo=TINY)
+    config = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=4 * SB3_DEFAULTS.buffer_size)
     path, trainer = tmp_path / "run.snapshot", Trainer(config)
     with pytest.raises(Stop):
         trainer.run(Population.grid(Phi(0.9, 0.3, 1.0), [0, 1], 3e-4, 1), stop_after(3), snapshot=path,
@@ -148,7 +152,7 @@ def test_a_snapshot_of_another_population_is_not_used(tmp_path):
 
 
 def test_envs_that_do_not_replay_start_the_run_over(tmp_path):
-    config = TrainConfig(env_id="LunarLanderNoVel-v3", total_timesteps=4 * TINY.buffer_size, ppo=TINY,
+    config = TrainConfig(env_id="LunarLander-v3", total_timesteps=4 * TINY.buffer_size, ppo=TINY,
                          backend="host", env_workers=0)
     population = Population.grid(Phi(0.9, 0.3, 1.0), [0, 1], 3e-4, 1)
     path, trainer = tmp_path / "run.snapshot", Trainer(config)
@@ -216,17 +220,18 @@ def test_ermrl_train_killed_resumes_from_its_snapshot(tmp_path):
 def test_the_scores_so_far_of_a_model_in_training(tmp_path):
     """benchmarks/partial_test_summary.py reads a model's snapshot: the steps done and each agent's mean return
     over its last 10 episodes by then, as the unbroken run's episodes give them."""
-    config = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=10 * TINY.buffer_size, ppo=TINY)
+    steps = SB3_DEFAULTS.buffer_size
+    config = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=10 * steps)
     population = Population.grid(Phi(0.9, 0.3, 1.0), [0, 1], 3e-4, 1)
     trainer, partial = Trainer(config), tmp_path / "test.partial"
     unbroken = trainer.run(population)
     with pytest.raises(Stop):
         trainer.run(population, stop_after(5), snapshot=partial / "ermrl.snapshot", snapshot_every_s=0)
-    done = 4 * TINY.buffer_size
+    done = 4 * steps
     so_far = [np.mean(e.ret[e.timestep <= done][-10:]) for e in unbroken.episodes]
     r = script(Path(__file__).resolve().parent.parent / "benchmarks" / "partial_test_summary.py", partial)
     assert r.returncode == 0, r.stderr
     row = r.stdout.splitlines()[2]
-    assert row == (f"| `ermrl` (in training) | 2 | 0, 1 | {done:,} of {10 * TINY.buffer_size:,} | "
+    assert row == (f"| `ermrl` (in training) | 2 | 0, 1 | {done:,} of {10 * steps:,} | "
                    f"{np.mean(so_far):.1f} ± {np.std(so_far):.1f} (last 10 episodes so far) | — | "
                    f"{so_far[0]:.1f}, {so_far[1]:.1f} |")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ermrl.agent import AgentConfig, Phi
-from ermrl.ppo.config import PPOConfig, SB3_DEFAULTS
+from ermrl.ppo.config import SB3_DEFAULTS
 from ermrl.training import Population, TrainConfig, Trainer, train
 
 
@@ -20,8 +20,10 @@ def test_same_seeds_give_identical_fitness():
     cfg = config(timesteps=3 * 2048)
     pop = Population.grid([Phi(0.95, 0.5, 1.0), Phi(2.0, 0.1, 0.5)], 2, 3e-4, 1)
     trainer = Trainer(cfg)
-    a, b = trainer.run(pop), trainer.run(pop)
-    assert len(trainer._compiled) == 1  # the second run reuses the compiled program
+    a = trainer.run(pop)
+    compiled = dict(trainer.programs.compiled)
+    b = trainer.run(pop)
+    assert trainer.programs.compiled == compiled  # the second run reuses the compiled program
     assert np.all(np.isfinite(a.fitness()))
     np.testing.assert_array_equal(a.fitness(), b.fitness())
     for ea, eb in zip(a.episodes, b.episodes):
@@ -29,14 +31,37 @@ def test_same_seeds_give_identical_fitness():
     assert not np.array_equal(a.fitness()[:2], a.fitness()[2:])  # different Φ, different agents
 
 
-def test_agent_in_a_population_of_21_matches_agent_alone():
+def test_a_trainer_of_the_same_config_reuses_its_programs_and_trains_alike():
+    """A second Trainer of the same static config (any budget) neither traces nor compiles again, and trains the
+    same agents to the same bits; another config, or the host backend (whose functions hold its envs), gets its own."""
+    cfg = config(timesteps=2048)
+    pop = Population.grid(Phi(0.95, 0.5, 1.0), 2, 3e-4, 1)
+    first = Trainer(cfg)
+    a = first.run(pop)
+    again = Trainer(dataclasses.replace(cfg, total_timesteps=3 * 2048, backend="jax"))
+    assert again.programs is first.programs and (first.n_iterations, again.n_iterations) == (1, 3)
+    compiled = dict(first.programs.compiled)
+    b = Trainer(cfg).run(pop)
+    assert first.programs.compiled == compiled
+    np.testing.assert_array_equal(a.fitness(), b.fitness())
+    for ea, eb in zip(a.episodes, b.episodes):
+        np.testing.assert_array_equal(ea.ret, eb.ret)
+    assert Trainer(config(timesteps=2048, reservoirs=2)).programs is not first.programs
+    host = dataclasses.replace(cfg, backend="host")
+    assert Trainer(host).programs is not Trainer(host).programs
+
+
+def test_agent_in_a_population_of_12_matches_agent_alone():
+    """12 agents: the population size of a CMA-ES generation in test_evolve.py (6 trials × 2 seeds), whose program
+    this reuses; agents 0, 5 and 11 are the first and last of one device's shard and the last of the other's (on 2
+    devices). Alone, an agent is padded to the devices' count."""
     cfg = config(timesteps=2048)
     rng = np.random.default_rng(0)
-    phis = [Phi(*np.exp(rng.uniform(np.log([0.1, 0.05, 0.2]), np.log([3.0, 1.0, 5.0])))) for _ in range(7)]
+    phis = [Phi(*np.exp(rng.uniform(np.log([0.1, 0.05, 0.2]), np.log([3.0, 1.0, 5.0])))) for _ in range(4)]
     big = Population.grid(phis, 3, 3e-4, 1)
     trainer = Trainer(cfg)
     state, _ = trainer.step(trainer.init(big))
-    for i in (0, 10, 20):
+    for i in (0, 5, 11):
         alone = Population(big.seeds[i:i + 1], Phi(*(f[i:i + 1] for f in big.phi)), big.learning_rate[i:i + 1])
         solo, _ = trainer.step(trainer.init(alone))
         for x, y in zip(jax.tree.leaves(state.learner.params), jax.tree.leaves(solo.learner.params)):
@@ -62,8 +87,9 @@ def test_full_cartpole_ppo_reaches_450_within_100k():
 
 
 def test_masked_cartpole_needs_the_reservoir():
-    """Without velocities plain PPO stays below 100; a reservoir (sr 0.95, lr 0.5) recovers them (≥ 250)."""
-    cfg = config(timesteps=300_000, reservoirs=0)
+    """Without velocities plain PPO stays below 100; a reservoir (sr 0.95, lr 0.5) recovers them (≥ 250), on the same
+    100k steps. SB3's PPO on 8 envs × 256 steps (its 2048-step rollout): the reservoir learns within 100k there."""
+    cfg = config(timesteps=100_000, reservoirs=0, n_envs=8, n_steps=256)
     plain = train(cfg, Population.grid(Phi(1.0, 1.0, 1.0), 3, 3e-4, 0))
     assert plain.fitness().mean() < 100, plain.fitness()
     ermrl = train(dataclasses.replace(cfg, agent=AgentConfig(reservoirs=1)), Population.grid(Phi(0.95, 0.5, 1.0), 3, 3e-4, 1))
@@ -82,8 +108,11 @@ def test_box_actions_and_time_limit_truncation_on_pendulum():
 
 
 def test_several_envs_per_agent():
-    cfg = dataclasses.replace(config("CartPole-v1", timesteps=4096, reservoirs=0), ppo=PPOConfig(n_envs=4, n_steps=256, batch_size=256, n_epochs=4))
-    res = train(cfg, Population.grid(Phi(1.0, 1.0, 1.0), 1, 3e-4, 0))
-    ep = res.episodes[0]
-    assert res.total_timesteps == 4096 and ep.length.sum() <= 4096
-    np.testing.assert_array_equal(ep.ret, ep.length)
+    """8 envs × 256 steps per agent: the plain PPO of test_masked_cartpole_needs_the_reservoir, whose program this
+    reuses (3 seeds)."""
+    cfg = config(timesteps=4096, reservoirs=0, n_envs=8, n_steps=256)
+    res = train(cfg, Population.grid(Phi(1.0, 1.0, 1.0), 3, 3e-4, 0))
+    assert res.total_timesteps == 4096
+    for ep in res.episodes:
+        assert ep.length.sum() <= 4096
+        np.testing.assert_array_equal(ep.ret, ep.length)  # CartPoleNoVel pays 1 per step, like CartPole

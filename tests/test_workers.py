@@ -17,7 +17,6 @@ import optuna
 import pytest
 from optuna.trial import TrialState
 
-from ermrl.agent import AgentConfig
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.evolve import evolve, make_trainers
 from ermrl.evolution.generations import FULL, Ledger
@@ -25,7 +24,6 @@ from ermrl.evolution.heartbeat import WORKER_ATTR
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
 from ermrl.evolution.workers import WorkerConfig, worker_seed
-from ermrl.reservoir import ReservoirSpec
 from ermrl.storage import encode_study_record
 from ermrl.training import TrainConfig
 
@@ -38,9 +36,10 @@ LOST = "worker lost (no heartbeat for 3 s)"
 
 
 def evolve_args(timesteps=2048, batch=2) -> list[str]:
-    """The workers' evolution: CartPoleNoVel, 10 units, 1 seed, ``batch`` trials trained at a time."""
-    return ["evolve", "--env", "CartPoleNoVel-v1", "--units", "10", "--seeds", "1", "--timesteps", str(timesteps),
-            "--fixed-iss", "1.0", "--popsize", str(POPSIZE), "--batch", str(batch), "--quiet", "--no-estimate"]
+    """The workers' evolution: CartPoleNoVel with the default reservoir (the programs of `ermrl train`'s defaults,
+    which many tests compile), 1 seed, ``batch`` trials trained at a time."""
+    return ["evolve", "--env", "CartPoleNoVel-v1", "--seeds", "1", "--timesteps", str(timesteps), "--fixed-iss", "1.0",
+            "--popsize", str(POPSIZE), "--batch", str(batch), "--quiet", "--no-estimate"]
 
 
 @pytest.fixture(scope="module")
@@ -202,8 +201,7 @@ def test_killed_and_frozen_workers_are_replaced(postgres_url, tmp_path, compiled
 
 
 def tiny(trials, popsize=4):
-    train = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048,
-                        agent=AgentConfig(spec=ReservoirSpec(units=10)))
+    train = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048)
     return EvolveConfig(train=train, space=SearchSpace(fixed_iss=1.0), trials=trials, seeds=1, sampler="cmaes",
                         popsize=popsize)
 
@@ -319,9 +317,9 @@ def test_database_passwords_are_never_printed(postgres_url, tmp_path):
     evolution's progress and hints, a missing study's error, an unreachable server's error."""
     url = postgres_url.replace("postgresql://ermrl@", "postgresql://ermrl:s3cret@")
     shown = postgres_url.replace("postgresql://ermrl@", "postgresql://ermrl:***@")
-    r = ermrl("evolve", "--env", "CartPoleNoVel-v1", "--units", "10", "--seeds", "1", "--timesteps", "2048",
-              "--fixed-iss", "1.0", "--popsize", "2", "--trials", "2", "--storage", url, "--study", "p", "--quiet",
-              "--no-estimate", cwd=tmp_path)
+    r = ermrl("evolve", "--env", "CartPoleNoVel-v1", "--seeds", "1", "--timesteps", "2048", "--fixed-iss", "1.0",
+              "--popsize", "2", "--trials", "2", "--storage", url, "--study", "p", "--quiet", "--no-estimate",
+              cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert f"study 'p' in {shown}: 0/2 trials done" in r.stdout and f"--storage {shown}" in r.stdout
     r2 = ermrl("select", "--study", "nope", "--storage", url, cwd=tmp_path)

@@ -9,6 +9,7 @@ iterations only reports progress and gathers finished episodes.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from pathlib import Path
 from typing import Callable, NamedTuple
@@ -204,24 +205,60 @@ def _pad(x: np.ndarray, size: int) -> np.ndarray:
     return x if extra == 0 else np.concatenate([x, np.repeat(x[:1], extra, axis=0)])
 
 
+class Programs(NamedTuple):
+    """A config's jitted population functions over a device mesh, and its compiled iterations."""
+
+    fns: AgentFns
+    sharding: NamedSharding
+    """Agent axis over the mesh's devices."""
+    init: Callable
+    """Jitted, sharded ``fns.init`` over a padded population."""
+    iteration: Callable
+    """Jitted, sharded ``fns.iteration`` (donates its state)."""
+    learn: Callable
+    """Jitted, sharded ``fns.learn`` (donates its state)."""
+    compiled: dict[int, Callable]
+    """Padded population size -> the compiled iteration for it."""
+
+
+def build_programs(config: TrainConfig, devices: tuple) -> Programs:
+    """Jits ``config``'s per-agent functions, ``vmap``-ed over agents and sharded over ``devices``."""
+    fns = make_agent_fns(config)
+    mesh = Mesh(np.array(devices), ("agents",))
+    spec = PartitionSpec("agents")
+    shard = lambda f: jax.shard_map(jax.vmap(f), mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
+    return Programs(fns, NamedSharding(mesh, spec), jax.jit(shard(fns.init)),
+                    jax.jit(shard(fns.iteration), donate_argnums=0), jax.jit(shard(fns.learn), donate_argnums=0), {})
+
+
+@functools.lru_cache(maxsize=8)
+def _shared_programs(config: TrainConfig, devices: tuple) -> Programs:
+    return build_programs(config, devices)
+
+
+def programs_for(config: TrainConfig, devices: tuple) -> Programs:
+    """The programs of ``config`` on ``devices``. On the JAX backend one set serves every Trainer of the same
+    static config in the process (the last 8 configs kept), so building a Trainer again (a selection or test phase
+    after an evolution, a notebook, a test) neither traces nor compiles again; ``total_timesteps`` only sets the
+    number of iterations and is not part of the key. Host-backend Trainers get their own: their functions hold
+    the Gymnasium envs that the Trainer opens and closes."""
+    backend = envs.resolve_backend(config.env_id, config.backend)
+    if backend == "host":
+        return build_programs(config, devices)
+    return _shared_programs(dataclasses.replace(config, total_timesteps=1, backend=backend, env_workers=0), devices)
+
+
 class Trainer:
-    """Compiles the population program for one TrainConfig; ``run`` trains any population with it."""
+    """Trains any population of one TrainConfig with its compiled population program (:func:`programs_for`)."""
 
     def __init__(self, config: TrainConfig, devices=None):
         self.config = config
-        self.fns = make_agent_fns(config)
+        self.devices = list(devices if devices is not None else jax.devices())
+        self.programs = programs_for(config, tuple(self.devices))
+        self.fns, self.sharding = self.programs.fns, self.programs.sharding
         self.env, self.agent = self.fns.env, self.fns.agent
         self.host = isinstance(self.env, HostEnv)
-        self.devices = list(devices if devices is not None else jax.devices())
-        self.mesh = Mesh(np.array(self.devices), ("agents",))
-        self.sharding = NamedSharding(self.mesh, PartitionSpec("agents"))
-        spec = PartitionSpec("agents")
-        shard = lambda f: jax.shard_map(jax.vmap(f), mesh=self.mesh, in_specs=spec, out_specs=spec, check_vma=False)
-        self._init = jax.jit(shard(self.fns.init))
-        self._iteration = jax.jit(shard(self.fns.iteration), donate_argnums=0)
-        self._learn = jax.jit(shard(self.fns.learn), donate_argnums=0)
         self.n_iterations = config.ppo.iterations(config.total_timesteps)
-        self._compiled: dict[int, Callable] = {}
 
     def _padded_size(self, n: int) -> int:
         d = len(self.devices)
@@ -242,19 +279,21 @@ class Trainer:
             env_seeds = [np.random.SeedSequence([int(s), e]).generate_state(1)[0] for s in seeds for e in range(n_envs)]
             first_obs = self.env.reset(np.array(env_seeds)).reshape(size, n_envs, -1)
         args = (seeds, unit, phi, _pad(np.asarray(population.learning_rate, np.float32), size), first_obs)
-        return self._init(*jax.device_put(args, self.sharding))
+        return self.programs.init(*jax.device_put(args, self.sharding))
 
     def compiled(self, state: AgentState) -> Callable:
         """The iteration compiled for ``state``'s population size; one compile per size, reused by later runs."""
         size = jax.tree.leaves(state)[0].shape[0]
-        if size not in self._compiled:
+        compiled = self.programs.compiled
+        if size not in compiled:
             if self.host:
-                iteration = HostIteration(self.fns, self.config.ppo, self._learn, self.sharding, self.devices[0])
+                iteration = HostIteration(self.fns, self.config.ppo, self.programs.learn, self.sharding,
+                                          self.devices[0])
                 iteration.warm_up(state)
-                self._compiled[size] = iteration
+                compiled[size] = iteration
             else:
-                self._compiled[size] = self._iteration.lower(state).compile()
-        return self._compiled[size]
+                compiled[size] = self.programs.iteration.lower(state).compile()
+        return compiled[size]
 
     def close(self):
         """Closes the host envs (and their worker processes); ``init`` reopens them. No-op on the JAX backend."""
