@@ -34,6 +34,15 @@ PLACE_POLL_S = 0.1
 """Seconds between two looks while another worker is asking a trial numbered below one of ours."""
 
 
+def _suggest(space, trial: optuna.Trial) -> Phi:
+    """``space.suggest(trial)``, where the sampler's relative sampling runs. cmaes at popsize 2 (μ = 1) has no rank-μ
+    update: one of the bounds it takes the minimum of divides by its zero learning rate (the minimum stays
+    finite), a numpy warning that users need not see."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="divide by zero encountered in scalar divide", category=RuntimeWarning)
+        return space.suggest(trial)
+
+
 @dataclasses.dataclass(frozen=True)
 class WorkerConfig:
     """How one process takes part in a study. None of it is part of the study's config: a study resumes with
@@ -195,7 +204,7 @@ class Worker:
                 asked.append(trial)
         phis = {}
         for t in asked:
-            if self._survives(t, lambda t: phis.__setitem__(t.number, self.config.space.suggest(t))) \
+            if self._survives(t, lambda t: phis.__setitem__(t.number, _suggest(self.config.space, t))) \
                     and self.ledger.cma:  # the sampler chose the generation: record it at once, others wait for it
                 tag = self.study._storage.get_trial_system_attrs(t._trial_id).get(CMA_GENERATION)
                 if not self._survives(t, lambda t: t.set_user_attr(ATTR, 0 if tag is None else int(tag) + 1)):
