@@ -462,6 +462,47 @@ step_seed_schedule_paper() {  # C2 / the CartPole target: the paper-scale CartPo
     cp "$r"/test/{summary.json,summary.csv,curves.csv,test_config.json,test_phase.png} "$d/generation-900/test/"
   }
 }
+step_deterministic_eval() {  # the targets on rl-zoo's metric: the agents of the best configs trained again on the
+  # test seeds (1000-1009 × 1M, agents saved and committed), then each evaluated with its deterministic policy over
+  # 50 fresh episodes (`ermrl analyze evaluate`), beside its training score (final). ≈ 13 min a 500-unit Pendulum
+  # model here, ≈ 5 min a CartPole one, ≈ 3 min a PPO baseline
+  local d=docs/data/deterministic-eval
+  train_saved "$d/pendulum-default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 --iss 1.0 --ppo-lr 1e-4
+  # shellcheck disable=SC2046
+  train_saved "$d/pendulum-medium-500u" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 \
+      $(phi_flags docs/data/reservoir-sizes-medium/studies.log reservoir-sizes-medium-pendulum-500u)
+  local s  # the other evolved Pendulum Φ*: at 500 units (steps pendulum_500u_near_default, pendulum_500u_lr1e4), 100
+  for s in 500u-near-default 500u-lr1e-4 lr1e-4; do
+    # shellcheck disable=SC2046
+    train_saved "$d/pendulum-$s" --env PendulumNoVel-v1 --units "$([ "$s" = lr1e-4 ] && echo 100 || echo 500)" \
+        --ppo-lr 1e-4 $(phi_flags "docs/data/pendulum-$s/studies.log" "pendulum-$s")
+  done
+  train_saved "$d/pendulum-default-phi" --env PendulumNoVel-v1 --sr 0.95 --lr 0.5 --iss 1.0 --ppo-lr 1e-4
+  train_saved "$d/pendulum-ppo" --env PendulumNoVel-v1 --no-reservoir --ppo-lr 3e-4
+  train_saved "$d/pendulum-ppo-full-obs" --env Pendulum-v1 --no-reservoir --ppo-lr 3e-4
+  # shellcheck disable=SC2046
+  train_saved "$d/cartpole-fitness-1m" --env CartPoleNoVel-v1 --ppo-lr 1e-4 \
+      $(phi_flags docs/data/fitness-1m/studies.log cartpole-1res-fitness-1m)
+  # shellcheck disable=SC2046
+  train_saved "$d/cartpole-paper" --env CartPoleNoVel-v1 --ppo-lr 3e-4 \
+      $(phi_flags docs/data/partial-observability-paper/studies.log partial-observability-paper-cartpole-1res)
+  train_saved "$d/cartpole-ppo" --env CartPoleNoVel-v1 --no-reservoir --ppo-lr 3e-4
+  # LunarLander's `small` Φ* (2 reservoirs) at the paper's lr 1e-4 and 3M steps, where its test phase ended at 185.9:
+  # host envs, ≈ 2 h here; it resumes from OUT.snapshot (every 5 min) after a stop
+  # shellcheck disable=SC2046
+  train_saved "$d/lunarlander-small-2res" --env LunarLanderNoVel-v3 --reservoirs 2 --ppo-lr 1e-4 --env-workers 0 \
+      --timesteps 3000000 $(phi_flags docs/data/partial-observability-small/studies.log \
+      partial-observability-small-lunarlander-2res)
+  "$E" analyze evaluate "$d/lunarlander-small-2res" --episodes 50 --out "$d/lunarlander.md"
+  "$E" analyze evaluate "$d"/pendulum-{default-phi-500u,medium-500u,500u-near-default,500u-lr1e-4,default-phi,lr1e-4,ppo,ppo-full-obs} \
+      --episodes 50 --out "$d/pendulum.md"
+  "$E" analyze evaluate "$d"/cartpole-{fitness-1m,paper,ppo} --episodes 50 --out "$d/cartpole.md"
+}
+train_saved() {  # train_saved OUT ARGS...: `ermrl train ARGS` on the test seeds, 10 × 1M, agents saved in OUT/agents/
+  # (episodes.csv is left out of the repository: the curves and the per-seed scores are in curves.csv and summary.json)
+  [ -f "$1/summary.json" ] || "$E" train --seeds 10 --first-seed 1000 --timesteps 1000000 "${@:2}" --quiet --out "$1"
+  rm -f "$1/episodes.csv"
+}
 step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time around its defaults (connectivities
   # 0.1, bias ±1 on 10% of the units), with the default Φ (sr 0.95, lr 0.5, iss 1) on CartPoleNoVel and
   # PendulumNoVel, 10 seeds (1000-1009) × 300k each (the evolution's budget); a stopped run resumes from its snapshot
@@ -486,7 +527,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default deterministic_eval other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do

@@ -246,6 +246,12 @@ CASES = [
     ("analyze fft badagent.npz --out fig.png",
      "ermrl analyze: error: badagent.npz is not a readable ermrl agent file (KeyError: 'meta'); it "
      "is damaged or was not written by ermrl: retrain, or load another agent"),
+    ("analyze evaluate badagent.npz --episodes 0", "ermrl analyze: error: --episodes must be >= 1, got 0"),
+    ("analyze evaluate adir --out adir", "ermrl analyze: error: --out adir is a folder; give a file path such as "
+                                         "adir/evaluation.md"),
+    ("analyze evaluate badagent.npz",
+     "ermrl analyze: error: badagent.npz is not a readable ermrl agent file (KeyError: 'meta'); it "
+     "is damaged or was not written by ermrl: retrain, or load another agent"),
     # -- video, dashboard, the command itself ----------------------------------------------------------------
     ("video", "ermrl video: error: give a run folder (ermrl video RUN) or an agent file (--agent FILE)"),
     ("video nothere", "ermrl video: error: run folder nothere does not exist; give a folder written by `ermrl train` "

@@ -95,3 +95,21 @@ def evolved(tmp_path_factory):
     from smoke_study import evolve
 
     return evolve(tmp_path_factory.mktemp("evolved"))
+
+
+# -- real saved agents that the analyses of saved agents share ------------------------------------------------
+
+@pytest.fixture(scope="session")
+def saved(tmp_path_factory):
+    """Real saved agents, trained once per session by the CLI: PendulumNoVel ER-MRL and plain PPO (2 seeds each,
+    200-step episodes) and CartPoleNoVel ER-MRL (1 seed, whose early episodes are far shorter). Tests read them."""
+    from cli_runs import ermrl
+
+    folder = tmp_path_factory.mktemp("saved")
+    for name, env, seeds, extra in [("ermrl", "PendulumNoVel-v1", "2", []),
+                                    ("ppo", "PendulumNoVel-v1", "2", ["--no-reservoir"]),
+                                    ("cartpole", "CartPoleNoVel-v1", "1", [])]:
+        r = ermrl("train", "--env", env, "--timesteps", "2048", "--seeds", seeds, "--quiet", "--out",
+                  str(folder / name), *extra)
+        assert r.returncode == 0, r.stderr
+    return folder

@@ -72,20 +72,6 @@ def test_plot_and_errors(tmp_path):
         plot_spectra({}, tmp_path / "empty.png")
 
 
-@pytest.fixture(scope="module")
-def saved(tmp_path_factory):
-    """Real saved agents, trained once for this module's CLI tests: PendulumNoVel ER-MRL and plain PPO (2 seeds
-    each, 200-step episodes) and CartPoleNoVel ER-MRL (1 seed, whose early episodes are far shorter)."""
-    folder = tmp_path_factory.mktemp("saved")
-    for name, env, seeds, extra in [("ermrl", "PendulumNoVel-v1", "2", []),
-                                    ("ppo", "PendulumNoVel-v1", "2", ["--no-reservoir"]),
-                                    ("cartpole", "CartPoleNoVel-v1", "1", [])]:
-        r = ermrl("train", "--env", env, "--timesteps", "2048", "--seeds", seeds, "--quiet", "--out",
-                  str(folder / name), *extra)
-        assert r.returncode == 0, r.stderr
-    return folder
-
-
 def test_cli_context_and_fft_on_saved_agents(saved, tmp_path):
     """`ermrl analyze context` and `ermrl analyze fft` on real saved agents (ER-MRL and PPO, 2 seeds each): the
     fft table has one row per run with both agents; for PPO the policy input is the observation, so its two

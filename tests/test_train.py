@@ -86,17 +86,26 @@ def test_full_cartpole_ppo_reaches_450_within_100k():
     assert res.fitness().mean() >= 450
 
 
-def test_masked_cartpole_needs_the_reservoir():
+def test_masked_cartpole_needs_the_reservoir(tmp_path):
     """Without velocities plain PPO stays below 100; a reservoir (sr 0.95, lr 0.5) recovers them (≥ 250), on the same
-    100k steps. SB3's PPO on 8 envs × 256 steps (its 2048-step rollout): the reservoir learns within 100k there."""
+    100k steps. SB3's PPO on 8 envs × 256 steps (its 2048-step rollout): the reservoir learns within 100k there.
+    The saved agents, evaluated after training with their deterministic policy in Gymnasium's own CartPole (10
+    episodes each), keep the difference."""
+    from ermrl.agent_files import write_agents
+    from ermrl.analysis.policy_eval import agent_returns
+
     cfg = config(timesteps=100_000, reservoirs=0, n_envs=8, n_steps=256)
     plain = train(cfg, Population.grid(Phi(1.0, 1.0, 1.0), 3, 3e-4, 0))
     assert plain.fitness().mean() < 100, plain.fitness()
-    ermrl = train(dataclasses.replace(cfg, agent=AgentConfig(reservoirs=1)), Population.grid(Phi(0.95, 0.5, 1.0), 3, 3e-4, 1))
+    reservoir_cfg = dataclasses.replace(cfg, agent=AgentConfig(reservoirs=1))
+    ermrl = train(reservoir_cfg, Population.grid(Phi(0.95, 0.5, 1.0), 3, 3e-4, 1))
     assert ermrl.fitness().mean() >= 250, ermrl.fitness()
     _, curves = ermrl.curves()
     mean = np.nanmean(curves, axis=0)
     assert mean[-1] > 2 * mean[5]  # the curve rises
+    evaluated = {name: np.array([agent_returns(f, 10)[1].mean() for f in write_agents(tmp_path / name, c, res)])
+                 for name, c, res in [("plain", cfg, plain), ("ermrl", reservoir_cfg, ermrl)]}
+    assert evaluated["plain"].mean() < 100 and evaluated["ermrl"].mean() >= 250, evaluated
 
 
 def test_box_actions_and_time_limit_truncation_on_pendulum():

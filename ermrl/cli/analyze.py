@@ -1,10 +1,11 @@
-"""``ermrl analyze hp-map|probe|context|fft``: the HP map across studies, the probe of what a reservoir's context
-holds, and a saved agent's context and its rhythm."""
+"""``ermrl analyze hp-map|probe|context|fft|evaluate``: the HP map across studies, the probe of what a reservoir's
+context holds, a saved agent's context and its rhythm, and saved agents' returns evaluated after training."""
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from ermrl.cli import options
@@ -18,7 +19,7 @@ def add_parser(sub, formatter) -> None:
                                    "`ermrl analyze probe --env NOVEL_ID` measures how well a linear readout of "
                                    "the reservoir recovers the deleted velocities and predicts o_(t+k).",
                        formatter_class=formatter)
-    asub = p.add_subparsers(dest="analyze_command", required=True, metavar="hp-map|probe|context|fft")
+    asub = p.add_subparsers(dest="analyze_command", required=True, metavar="hp-map|probe|context|fft|evaluate")
     hp = asub.add_parser("hp-map", help="the top trials of several studies on sr × lr (log axes)",
                          description="Draw the --top best completed trials of each study on spectral radius × leak "
                                      "rate (log axes), one colour per env, circles for 1-reservoir studies and, in a "
@@ -76,6 +77,21 @@ def add_parser(sub, formatter) -> None:
                     help="spectra figure; FIG.md (table) and FIG.json (per agent) beside it")
     _episode_options(ff)
 
+    ev = asub.add_parser("evaluate", help="saved agents' returns over fresh episodes, deterministic by default",
+                         description="Run every saved agent of each RUN for --episodes episodes of its env (episode "
+                                     "i reset with env seed --seed + i) with its deterministic action (the Gaussian "
+                                     "mean, the argmax of the logits), as benchmarks such as rl-zoo's report a "
+                                     "trained agent; --stochastic draws from the policy instead. Per RUN: the "
+                                     "evaluation and the training score (final: the last 10 training episodes, the "
+                                     "paper's fitness) over its agents, mean ± std and IQM [95%% CI], and their "
+                                     "paired difference.", formatter_class=formatter)
+    ev.add_argument("sources", nargs="+", type=Path, metavar="RUN", help="run folders, agents/ folders or agent files")
+    ev.add_argument("--episodes", type=int, default=10, help="evaluation episodes per agent")
+    ev.add_argument("--stochastic", action="store_true", help="draw actions from the policy instead of its mode")
+    ev.add_argument("--out", type=Path, default=None, metavar="TABLE.md",
+                    help="write the table here, and every agent's returns to TABLE.json beside it")
+    _episode_options(ev)
+
 
 def _episode_options(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="env reset seed of the recorded episode")
@@ -85,14 +101,15 @@ def _episode_options(p) -> None:
 
 def run_command(args) -> int:
     _check_numbers(args)
-    return {"hp-map": cmd_hp_map, "probe": cmd_probe, "context": cmd_context, "fft": cmd_fft}[args.analyze_command](args)
+    return {"hp-map": cmd_hp_map, "probe": cmd_probe, "context": cmd_context, "fft": cmd_fft,
+            "evaluate": cmd_evaluate}[args.analyze_command](args)
 
 
 def _check_numbers(args) -> None:
     """One-line errors for the analyses' counts, seeds and Φ values, before any file is read."""
     if getattr(args, "seed", 0) < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
-    for flag in ("max_steps", "units"):
+    for flag in ("max_steps", "units", "episodes"):
         value = getattr(args, flag, None)
         if value is not None and value < 1:
             raise ConfigError(f"--{flag.replace('_', '-')} must be >= 1, got {value}")
@@ -218,4 +235,20 @@ def cmd_fft(args) -> int:
     storage.write_json(args.out.with_suffix(".json"), rows)
     print(table, end="")
     print(f"wrote {args.out.with_suffix('.png')}, {args.out.with_suffix('.md')} and {args.out.with_suffix('.json')}")
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from ermrl import storage
+    from ermrl.analysis.policy_eval import evaluate_runs
+
+    out = args.out if args.out is None else storage.check_file(args.out, example="evaluation.md")  # before any work
+    sources = {str(s): _agents(s) for s in dict.fromkeys(args.sources)}
+    table, rows = evaluate_runs(sources, args.episodes, args.seed, not args.stochastic, args.max_steps,
+                                log=lambda line: print(line, file=sys.stderr, flush=True))
+    print(table, end="")
+    if out is not None:
+        storage.write_text(out, table)
+        storage.write_json(out.with_suffix(".json"), rows)
+        print(f"wrote {out} and {out.with_suffix('.json')}")
     return 0
