@@ -49,7 +49,7 @@ def train(env_id: str, seeds: list[int], timesteps: int, phi: tuple[float, float
     """ermrl's PPO on ``draw``'s reservoirs ('reservoirpy' or 'ermrl'); returns (fitness per seed, train_s)."""
     from ermrl.agent import AgentConfig, Phi
     from ermrl.reservoir import ReservoirSpec
-    from ermrl.training.trainer import Population, TrainConfig, Trainer
+    from ermrl.training import Population, TrainConfig, Trainer
 
     config = TrainConfig(env_id=env_id, total_timesteps=timesteps, agent=AgentConfig(spec=ReservoirSpec(bias=bias)),
                          backend="jax")

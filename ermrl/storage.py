@@ -314,7 +314,7 @@ def decode_study_record(record: dict):
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.search_space import SearchSpace
     from ermrl.evolution.scoring import Baseline
-    from ermrl.training import TrainConfig
+    from ermrl.training.config import TrainConfig
 
     try:
         train = from_dict(TrainConfig, record["train"], "train")

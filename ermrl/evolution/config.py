@@ -12,7 +12,7 @@ import dataclasses
 from ermrl.errors import ConfigError
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.scoring import NORMALIZATIONS, Baseline
-from ermrl.training import TrainConfig
+from ermrl.training.config import TrainConfig
 
 
 SEED_SCHEDULES = ("fixed", "generation")

@@ -1,6 +1,6 @@
 """The recurrent baseline's per-agent functions (PPO with an LSTM policy, ``PPOConfig.model = "lstm"``).
 
-:func:`make_recurrent_fns` returns the same :class:`~ermrl.training.trainer.AgentFns` as the feedforward agent,
+:func:`make_recurrent_fns` returns the same :class:`~ermrl.training.state.AgentFns` as the feedforward agent,
 so the :class:`~ermrl.training.trainer.Trainer` (population, sharding, host loop, ``Results``) runs it unchanged;
 the LSTM states live in the agent state's env carry. JAX backend only, and no reservoir: the LSTM sees the raw
 (masked) observation, as RecurrentPPO's does.
@@ -122,8 +122,8 @@ def sequence_batch(steps: RecurrentStep, advantage: jax.Array, ret: jax.Array) -
 
 
 def make_recurrent_fns(config):
-    """The :class:`~ermrl.training.trainer.AgentFns` of the LSTM baseline for ``config`` (a TrainConfig)."""
-    from ermrl.training.trainer import AgentFns, AgentState, IterationLog
+    """The :class:`~ermrl.training.state.AgentFns` of the LSTM baseline for ``config`` (a TrainConfig)."""
+    from ermrl.training.state import AgentFns, AgentState, IterationLog
 
     check(config)
     env = envs.make(config.env_id, config.backend)

@@ -1,128 +1,31 @@
 """Trains a population of ER-MRL agents as one jitted program (paper §3, "Inner loop").
 
 Each of the A agents has its own Φ, seed, reservoirs, policy, optimizer and envs. One call of the jitted
-``iteration`` runs, for every agent at once (``vmap``), a rollout of n_steps and a PPO update; the agent
-axis is sharded over the machine's devices (both CPU cores here) with ``shard_map``. The host loop over
-iterations only reports progress and gathers finished episodes.
+``iteration`` (:mod:`ermrl.training.programs`) runs, for every agent at once (``vmap``), a rollout of n_steps and a
+PPO update; the agent axis is sharded over the machine's devices (both CPU cores here) with ``shard_map``. The host
+loop over iterations here only reports progress, keeps snapshots and gathers finished episodes.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import time
 from pathlib import Path
-from typing import Callable, NamedTuple
+from typing import Callable
 
 import jax
-import jax.numpy as jnp
 import numpy as np
-from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ermrl import envs, provenance
-from ermrl.agent import Agent, AgentConfig, Phi, Reservoirs
-from ermrl.errors import ConfigError
-from ermrl.training.host_loop import HostIteration
-from ermrl.ppo import update as ppo_update
-from ermrl.ppo.config import PPOConfig
-from ermrl.ppo.losses import Batch, bootstrapped_gae
-from ermrl.ppo.networks import ActorCritic
-from ermrl.training.results import WALL_S, Policies, Results
-from ermrl.envs import HostEnv, JaxEnv
+from ermrl import provenance
+from ermrl.agent import Phi
+from ermrl.envs import HostEnv
 from ermrl.envs.host_groups import ReplayMismatch
 from ermrl.training import snapshots
-from ermrl.training.rollout import EnvCarry, Step, collect, start, start_from_obs
-
-
-@dataclasses.dataclass(frozen=True)
-class TrainConfig:
-    """Everything static about a population's training (one compile serves any Φ, seeds and learning rates)."""
-
-    env_id: str = "CartPoleNoVel-v1"
-    """Gymnasium-style id; NoVel ids delete the velocity dims."""
-    total_timesteps: int = 300_000
-    """Env steps per agent; like SB3, training stops at the first update boundary at or past it."""
-    agent: AgentConfig = AgentConfig()
-    ppo: PPOConfig = PPOConfig()
-    backend: str = "auto"
-    """'auto' (JAX when the env has a JAX version, else Gymnasium on the host), 'jax' or 'host'."""
-    env_workers: int | str = "auto"
-    """Host backend only: processes that step the envs (0: the main process; 'auto': one per device when an
-    env step costs more than the IPC). Results do not depend on it."""
-
-    def __post_init__(self):
-        if self.total_timesteps < 1:
-            raise ConfigError(f"total timesteps must be >= 1, got {self.total_timesteps}")
-        if self.env_workers != "auto" and not (isinstance(self.env_workers, int) and self.env_workers >= 0):
-            raise ConfigError(f"env workers must be 'auto' or an integer >= 0, got {self.env_workers!r}")
-
-
-@dataclasses.dataclass(frozen=True)
-class Population:
-    """Per-agent inputs, each with a leading agent axis of length A."""
-
-    seeds: np.ndarray
-    """(A,) int: seeds reservoir weights (seed + k for reservoir k), policy init and envs."""
-    phi: Phi
-    """Fields (A, K) float32."""
-    learning_rate: np.ndarray
-    """(A,) float32 PPO step sizes."""
-
-    @property
-    def size(self) -> int:
-        return len(self.seeds)
-
-    @staticmethod
-    def grid(phis: list[Phi] | Phi, seeds: int | list[int], learning_rate: float | list[float],
-             reservoirs: int) -> "Population":
-        """Every Φ crossed with every learning rate and every seed: agent i = (phis[i // (L·S)],
-        learning_rates[i // S % L], seeds[i % S]). Φ fields are scalars or (K,)."""
-        phis = [phis] if isinstance(phis, Phi) else list(phis)
-        seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
-        lrs = [learning_rate] if np.ndim(learning_rate) == 0 else list(learning_rate)
-        as_k = lambda v: np.broadcast_to(np.asarray(v, np.float32), (reservoirs,))
-        rows = [(p, lr, s) for p in phis for lr in lrs for s in seed_list]
-        return Population(
-            seeds=np.array([s for _, _, s in rows], np.int64),
-            phi=Phi(*(np.stack([as_k(getattr(p, f)) for p, _, _ in rows]) for f in Phi._fields)),
-            learning_rate=np.array([lr for _, lr, _ in rows], np.float32),
-        )
-
-
-    @staticmethod
-    def concat(parts: list["Population"]) -> "Population":
-        """The agents of ``parts``, in order, as one population (Φ with the same K in every part)."""
-        return Population(seeds=np.concatenate([p.seeds for p in parts]),
-                          phi=Phi(*(np.concatenate([getattr(p.phi, f) for p in parts]) for f in Phi._fields)),
-                          learning_rate=np.concatenate([p.learning_rate for p in parts]))
-
-
-class AgentState(NamedTuple):
-    """Everything one agent carries between iterations."""
-
-    learner: ppo_update.LearnerState
-    reservoirs: Reservoirs
-    envs: EnvCarry
-    key: jax.Array
-
-
-def _kept_leaves(state: AgentState) -> list:
-    """The leaves of ``state`` that a snapshot keeps: all but the reservoirs' weights, which never change during
-    training and are drawn again from the seeds and Φ on resume (at 1000 units they are 4 MB an agent)."""
-    return jax.tree.leaves(state._replace(reservoirs=None))
-
-
-class IterationLog(NamedTuple):
-    """What one iteration reports per agent."""
-
-    finished_return: jax.Array
-    """(n_steps, n_envs) returns of the episodes that ended at each step, NaN elsewhere."""
-    finished_length: jax.Array
-    """(n_steps, n_envs) lengths, 0 elsewhere."""
-    metrics: dict
-    """Scalars averaged over the update's minibatches."""
-    finite: jax.Array
-    """() bool: parameters and losses are all finite."""
+from ermrl.training.config import Population, TrainConfig
+from ermrl.training.host_loop import HostIteration
+from ermrl.training.programs import programs_for
+from ermrl.training.state import AgentState, IterationLog, _kept_leaves
+from ermrl.training.results import WALL_S, Policies, Results
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,113 +42,10 @@ class Progress:
     compile_s: float
 
 
-class AgentFns(NamedTuple):
-    """The pure per-agent functions of a TrainConfig (purejaxrl's ``make_train``); ``vmap`` adds the agent axis."""
-
-    env: JaxEnv | HostEnv
-    agent: Agent
-    net: ActorCritic
-    init: Callable
-    """(seed, unit_weights, phi, learning_rate, first_obs) -> AgentState. ``first_obs`` (n_envs, obs_dim) are
-    the reset observations of host envs; None on the JAX backend, which resets its own envs."""
-    iteration: Callable
-    """AgentState -> (AgentState, IterationLog): rollout and update, JAX backend only."""
-    learn: Callable
-    """(AgentState, final EnvCarry, Step (n_steps, n_envs, ...), key) -> (AgentState, IterationLog)."""
-
-
-def make_agent_fns(config: TrainConfig) -> AgentFns:
-    """Builds the per-agent functions for ``config``'s env, agent and PPO settings (``ppo.model = "lstm"``: the
-    recurrent baseline's, :func:`ermrl.training.recurrent.make_recurrent_fns`)."""
-    if config.ppo.model == "lstm":
-        from ermrl.training.recurrent import make_recurrent_fns
-
-        return make_recurrent_fns(config)
-    env = envs.make(config.env_id, config.backend, config.env_workers)
-    agent = Agent(config.agent, env.info)
-    net = ActorCritic(env.info.action, config.ppo.hidden, config.ppo.log_std_init)
-    ppo = config.ppo
-
-    def init(seed, unit_weights, phi: Phi, learning_rate, first_obs) -> AgentState:
-        key = jax.random.PRNGKey(seed)
-        k_policy, k_env, k_next = jax.random.split(key, 3)
-        res = Agent.build(unit_weights, phi)
-        learner = ppo_update.init_learner(net, ppo, k_policy, agent.context_dim, learning_rate)
-        if first_obs is None:
-            carry = start(env, agent, res, k_env, ppo.n_envs)
-        else:  # host envs: the env state lives on the host
-            carry = start_from_obs(agent, res, first_obs, jnp.zeros((ppo.n_envs,), jnp.int32))
-        return AgentState(learner, res, carry, k_next)
-
-    def learn(state: AgentState, carry: EnvCarry, steps: Step, k_update) -> tuple[AgentState, IterationLog]:
-        params = state.learner.params
-        advantage, ret = bootstrapped_gae(steps.reward, steps.value, steps.done, steps.truncated,
-                                          net.value(params, steps.final_context), net.value(params, carry.context),
-                                          ppo.gamma, ppo.gae_lambda)
-        flat = lambda x: x.reshape((ppo.buffer_size,) + x.shape[2:])
-        batch = Batch(flat(steps.context), flat(steps.action), flat(steps.log_prob), flat(advantage), flat(ret))
-        learner, metrics = ppo_update.update(state.learner, batch, k_update, net, ppo)
-        leaves = jax.tree.leaves(learner.params) + list(metrics.values())
-        finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(x)) for x in leaves]))
-        log = IterationLog(steps.finished_return, steps.finished_length, metrics, finite)
-        return AgentState(learner, state.reservoirs, carry, state.key), log
-
-    def iteration(state: AgentState) -> tuple[AgentState, IterationLog]:
-        key, k_roll, k_update = jax.random.split(state.key, 3)
-        carry, steps = collect(env, agent, net, state.learner.params, state.reservoirs, state.envs, k_roll,
-                               ppo.n_steps)
-        return learn(state._replace(key=key), carry, steps, k_update)
-
-    return AgentFns(env, agent, net, init, iteration, learn)
-
-
 def _pad(x: np.ndarray, size: int) -> np.ndarray:
     """Pads the leading axis to ``size`` by repeating the first row (padded agents are discarded)."""
     extra = size - x.shape[0]
     return x if extra == 0 else np.concatenate([x, np.repeat(x[:1], extra, axis=0)])
-
-
-class Programs(NamedTuple):
-    """A config's jitted population functions over a device mesh, and its compiled iterations."""
-
-    fns: AgentFns
-    sharding: NamedSharding
-    """Agent axis over the mesh's devices."""
-    init: Callable
-    """Jitted, sharded ``fns.init`` over a padded population."""
-    iteration: Callable
-    """Jitted, sharded ``fns.iteration`` (donates its state)."""
-    learn: Callable
-    """Jitted, sharded ``fns.learn`` (donates its state)."""
-    compiled: dict[int, Callable]
-    """Padded population size -> the compiled iteration for it."""
-
-
-def build_programs(config: TrainConfig, devices: tuple) -> Programs:
-    """Jits ``config``'s per-agent functions, ``vmap``-ed over agents and sharded over ``devices``."""
-    fns = make_agent_fns(config)
-    mesh = Mesh(np.array(devices), ("agents",))
-    spec = PartitionSpec("agents")
-    shard = lambda f: jax.shard_map(jax.vmap(f), mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
-    return Programs(fns, NamedSharding(mesh, spec), jax.jit(shard(fns.init)),
-                    jax.jit(shard(fns.iteration), donate_argnums=0), jax.jit(shard(fns.learn), donate_argnums=0), {})
-
-
-@functools.lru_cache(maxsize=8)
-def _shared_programs(config: TrainConfig, devices: tuple) -> Programs:
-    return build_programs(config, devices)
-
-
-def programs_for(config: TrainConfig, devices: tuple) -> Programs:
-    """The programs of ``config`` on ``devices``. On the JAX backend one set serves every Trainer of the same
-    static config in the process (the last 8 configs kept), so building a Trainer again (a selection or test phase
-    after an evolution, a notebook, a test) neither traces nor compiles again; ``total_timesteps`` only sets the
-    number of iterations and is not part of the key. Host-backend Trainers get their own: their functions hold
-    the Gymnasium envs that the Trainer opens and closes."""
-    backend = envs.resolve_backend(config.env_id, config.backend)
-    if backend == "host":
-        return build_programs(config, devices)
-    return _shared_programs(dataclasses.replace(config, total_timesteps=1, backend=backend, env_workers=0), devices)
 
 
 class Trainer:
