@@ -488,12 +488,17 @@ step_deterministic_eval() {  # the targets on rl-zoo's metric: the agents of the
       $(phi_flags docs/data/partial-observability-paper/studies.log partial-observability-paper-cartpole-1res)
   train_saved "$d/cartpole-ppo" --env CartPoleNoVel-v1 --no-reservoir --ppo-lr 3e-4
   # LunarLander's `small` Φ* (2 reservoirs) at the paper's lr 1e-4 and 3M steps, where its test phase ended at 185.9:
-  # host envs, ≈ 2 h here; it resumes from OUT.snapshot (every 5 min) after a stop
+  # host envs, ≈ 55 min here (2026-11-26); it resumes from OUT.snapshot (every 5 min) after a stop
   # shellcheck disable=SC2046
   train_saved "$d/lunarlander-small-2res" --env LunarLanderNoVel-v3 --reservoirs 2 --ppo-lr 1e-4 --env-workers 0 \
       --timesteps 3000000 $(phi_flags docs/data/partial-observability-small/studies.log \
       partial-observability-small-lunarlander-2res)
-  "$E" analyze evaluate "$d/lunarlander-small-2res" --episodes 50 --out "$d/lunarlander.md"
+  # and the `medium` Φ* at lr 3e-4, the model that met the target on the paper's score (step lunarlander_lr3e4)
+  # shellcheck disable=SC2046
+  train_saved "$d/lunarlander-medium-2res-lr3e-4" --env LunarLanderNoVel-v3 --reservoirs 2 --ppo-lr 3e-4 \
+      --env-workers 0 --timesteps 3000000 $(phi_flags docs/data/partial-observability-medium/studies.log \
+      partial-observability-medium-lunarlander-2res)
+  "$E" analyze evaluate "$d"/lunarlander-{small-2res,medium-2res-lr3e-4} --episodes 50 --out "$d/lunarlander.md"
   "$E" analyze evaluate "$d"/pendulum-{default-phi-500u,medium-500u,500u-near-default,500u-lr1e-4,default-phi,lr1e-4,ppo,ppo-full-obs} \
       --episodes 50 --out "$d/pendulum.md"
   "$E" analyze evaluate "$d"/cartpole-{fitness-1m,paper,ppo} --episodes 50 --out "$d/cartpole.md"
