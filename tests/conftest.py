@@ -102,7 +102,8 @@ def evolved(tmp_path_factory):
 @pytest.fixture(scope="session")
 def saved(tmp_path_factory):
     """Real saved agents, trained once per session by the CLI: PendulumNoVel ER-MRL and plain PPO (2 seeds each,
-    200-step episodes) and CartPoleNoVel ER-MRL (1 seed, whose early episodes are far shorter). Tests read them."""
+    200-step episodes) and CartPoleNoVel ER-MRL (1 seed, whose early episodes are far shorter). Tests read the
+    agents and may write figures beside them."""
     from cli_runs import ermrl
 
     folder = tmp_path_factory.mktemp("saved")
