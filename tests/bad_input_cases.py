@@ -247,6 +247,8 @@ CASES = [
      "ermrl analyze: error: badagent.npz is not a readable ermrl agent file (KeyError: 'meta'); it "
      "is damaged or was not written by ermrl: retrain, or load another agent"),
     ("analyze evaluate badagent.npz --episodes 0", "ermrl analyze: error: --episodes must be >= 1, got 0"),
+    ("analyze evaluate badagent.npz --seed -1", "ermrl analyze: error: --seed must be >= 0, got -1"),
+    ("analyze evaluate badagent.npz --max-steps 0", "ermrl analyze: error: --max-steps must be >= 1, got 0"),
     ("analyze evaluate adir --out adir", "ermrl analyze: error: --out adir is a folder; give a file path such as "
                                          "adir/evaluation.md"),
     ("analyze evaluate badagent.npz",

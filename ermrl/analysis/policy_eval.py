@@ -71,14 +71,12 @@ def evaluate_runs(sources: dict[str, list[Path]], episodes: int = 10, first_seed
                 log(f"[{done}/{total}] {f}: {returns.mean():.1f} over {episodes} episodes "
                     f"({spent:.0f} s, ≈ {spent / done * (total - done):.0f} s left)")
         rows += found
-        evaluation = np.array([r["evaluation"] for r in found])
-        final = np.array([np.nan if r["final"] is None else r["final"] for r in found], float)
+        evaluation, final = [r["evaluation"] for r in found], [r["final"] for r in found]  # final: None if diverged
         cells = []
-        for x in (evaluation, final):
-            s = summarize(x)
+        for s in (summarize(evaluation), on_final := summarize(final)):
             cells += ["—" if s.mean is None else f"{s.mean:.1f} ± {s.std:.1f}", format_ci(s.iqm, s.iqm_low, s.iqm_high)]
-        both = np.isfinite(final)
-        paired = str(paired_difference(evaluation[both], final[both])) if both.sum() >= 2 else "—"
+        # paired_difference leaves out the pairs of diverged agents itself, and needs 2 pairs left
+        paired = str(paired_difference(evaluation, final)) if on_final.n - on_final.n_diverged >= 2 else "—"
         lines.append(f"| {label} | {len(found)} | " + " | ".join(cells) + f" | {paired} |")
     lines += ["", f"Episode i of every agent is reset with env seed {first_seed} + i; the training seeds are the "
                   "agents' own."]
