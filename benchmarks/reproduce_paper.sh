@@ -348,19 +348,12 @@ step_pendulum_500u_near_default() {  # the Pendulum target, a departure from the
       | tee "$d/summary.md"
 }
 step_pendulum_500u_near_default_wide() {  # the Pendulum target: step pendulum_500u_near_default with a fitness that
-  # ranks less noise, 8 seeds a trial, new for each generation (`--seed-schedule generation`), 10 Φ a generation;
-  # 40 trials (4 generations), selection top 4 on 8 seeds × 1M, the Φ* trained on the test seeds with its agents
-  # saved (the model step deterministic_eval evaluates), against the default Φ at 500 units, the 3-seed
-  # near-default Φ* and the `medium` Φ*. 2026-11-26 on one H200: ≈ 2 min a generation (80 agents × 1M), ≈ 80 s the
-  # selection; the test model here, ≈ 10 min. On the 2 cores a generation would take ≈ 1 h
-  local s=pendulum-500u-near-default-wide d=docs/data/pendulum-500u-near-default-wide m=docs/data/reservoir-sizes-medium
+  # ranks less noise (see near_default_wide), against the default Φ at 500 units, the 3-seed near-default Φ* and the
+  # `medium` Φ*. 2026-11-26 on one H200: ≈ 108 s a generation (80 agents × 1M), ≈ 80 s the selection; the test model
+  # here, ≈ 8 min. On the 2 cores a generation would take ≈ 1 h
+  local d=docs/data/pendulum-500u-near-default-wide m=docs/data/reservoir-sizes-medium
   local t=docs/data/deterministic-eval/pendulum-500u-near-default-wide
-  "$E" evolve --env PendulumNoVel-v1 --units 500 --reservoirs 1 --fixed-iss 1.0 --trials 40 --seeds 8 --popsize 10 \
-      --seed-schedule generation --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-lr 0.1 --max-lr 1.0 \
-      --study "$s" --storage "$d/studies.log" --out "runs/$s" --quiet
-  "$E" select --study "$s" --storage "$d/studies.log" --out "runs/$s" --top 4 --seeds 8 --quiet
-  # shellcheck disable=SC2046
-  train_saved "$t" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 $(phi_flags "$d/studies.log" "$s")
+  near_default_wide 500
   .venv/bin/python benchmarks/variant_summary.py "evolved near the default, 8 seeds=$t/summary.json" \
       "default Φ=$m/default-phi-500u/summary.json" \
       "evolved near the default, 3 seeds=docs/data/pendulum-500u-near-default/ermrl/summary.json" \
@@ -370,6 +363,34 @@ step_pendulum_500u_near_default_wide() {  # the Pendulum target: step pendulum_5
       --compare "evolved near the default, 8 seeds" "evolved at 3e-4 (medium)" \
       --title "500 units, CMA-ES near the default Φ, 8 seeds a trial" --figure "$d/pendulum.png" \
       | tee "$d/summary.md"
+}
+step_pendulum_100u_near_default_wide() {  # the same at the paper's 100 units, against the default Φ at 100 units,
+  # the best earlier 100-unit Φ* (step pendulum_lr1e4) and the 500-unit one. 2026-11-26 here, on the 2 cores: ≈ 20
+  # min a generation (80 agents × 1M at ≈ 65k agent-steps/s), ≈ 1 h 40 min in all
+  local d=docs/data/pendulum-100u-near-default-wide t=docs/data/deterministic-eval/pendulum-100u-near-default-wide
+  near_default_wide 100
+  .venv/bin/python benchmarks/variant_summary.py "evolved near the default, 100 units=$t/summary.json" \
+      "default Φ, 100 units=docs/data/fitness-1m/default-phi-pendulum/summary.json" \
+      "evolved at 1e-4, 100 units=docs/data/pendulum-lr1e-4/ermrl/summary.json" \
+      "evolved near the default, 500 units=docs/data/deterministic-eval/pendulum-500u-near-default-wide/summary.json" \
+      --compare "evolved near the default, 100 units" "default Φ, 100 units" \
+      --compare "evolved near the default, 100 units" "evolved at 1e-4, 100 units" \
+      --compare "evolved near the default, 100 units" "evolved near the default, 500 units" \
+      --title "100 units, CMA-ES near the default Φ, 8 seeds a trial" --figure "$d/pendulum.png" \
+      | tee "$d/summary.md"
+}
+near_default_wide() {  # near_default_wide UNITS: the CMA-ES of step pendulum_500u_near_default (bounds sr [0.1, 10],
+  # lr [0.1, 1] around the default Φ, trials at the test budget 1M and rate 1e-4) with each trial's fitness over 8
+  # seeds, new for each generation, and 10 Φ a generation; 40 trials (4 generations), selection top 4 on 8 seeds ×
+  # 1M, then the Φ* trained on the test seeds with its agents saved (the model step deterministic_eval evaluates)
+  local s="pendulum-$1u-near-default-wide"
+  "$E" evolve --env PendulumNoVel-v1 --units "$1" --reservoirs 1 --fixed-iss 1.0 --trials 40 --seeds 8 --popsize 10 \
+      --seed-schedule generation --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-lr 0.1 --max-lr 1.0 \
+      --study "$s" --storage "docs/data/$s/studies.log" --out "runs/$s" --quiet
+  "$E" select --study "$s" --storage "docs/data/$s/studies.log" --out "runs/$s" --top 4 --seeds 8 --quiet
+  # shellcheck disable=SC2046
+  train_saved "docs/data/deterministic-eval/$s" --env PendulumNoVel-v1 --units "$1" --ppo-lr 1e-4 \
+      $(phi_flags "docs/data/$s/studies.log" "$s")
 }
 step_probe_sizes() {  # C4 at C14's sizes: velocity R² of the 500-unit CartPole Φ* (`small`, the target's) and the
   # 500- and 1000-unit Pendulum Φ* (`medium`), against the default Φ and a memoryless reservoir of the same size
@@ -496,9 +517,9 @@ step_deterministic_eval() {  # the targets on rl-zoo's metric: the agents of the
   train_saved "$d/pendulum-medium-500u" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 \
       $(phi_flags docs/data/reservoir-sizes-medium/studies.log reservoir-sizes-medium-pendulum-500u)
   local s  # the other evolved Pendulum Φ*: at 500 units (steps pendulum_500u_near_default, pendulum_500u_lr1e4), 100
-  for s in 500u-near-default 500u-near-default-wide 500u-lr1e-4 lr1e-4; do
+  for s in 500u-near-default 500u-near-default-wide 100u-near-default-wide 500u-lr1e-4 lr1e-4; do
     # shellcheck disable=SC2046
-    train_saved "$d/pendulum-$s" --env PendulumNoVel-v1 --units "$([ "$s" = lr1e-4 ] && echo 100 || echo 500)" \
+    train_saved "$d/pendulum-$s" --env PendulumNoVel-v1 --units "$(case $s in lr1e-4 | 100u-*) echo 100 ;; *) echo 500 ;; esac)" \
         --ppo-lr 1e-4 $(phi_flags "docs/data/pendulum-$s/studies.log" "pendulum-$s")
   done
   train_saved "$d/pendulum-default-phi" --env PendulumNoVel-v1 --sr 0.95 --lr 0.5 --iss 1.0 --ppo-lr 1e-4
@@ -523,7 +544,7 @@ step_deterministic_eval() {  # the targets on rl-zoo's metric: the agents of the
       --env-workers 0 --timesteps 3000000 $(phi_flags docs/data/partial-observability-medium/studies.log \
       partial-observability-medium-lunarlander-2res)
   "$E" analyze evaluate "$d"/lunarlander-{small-2res,medium-2res-lr3e-4} --episodes 50 --out "$d/lunarlander.md"
-  "$E" analyze evaluate "$d"/pendulum-{default-phi-500u,medium-500u,500u-near-default,500u-near-default-wide,500u-lr1e-4,default-phi,lr1e-4,ppo,ppo-full-obs} \
+  "$E" analyze evaluate "$d"/pendulum-{default-phi-500u,medium-500u,500u-near-default,500u-near-default-wide,500u-lr1e-4,default-phi,100u-near-default-wide,lr1e-4,ppo,ppo-full-obs} \
       --episodes 50 --out "$d/pendulum.md"
   "$E" analyze evaluate "$d"/cartpole-{fitness-1m,paper,ppo} --episodes 50 --out "$d/cartpole.md"
 }
@@ -556,7 +577,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide deterministic_eval other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_100u_near_default_wide deterministic_eval other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
