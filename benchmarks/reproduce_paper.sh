@@ -365,8 +365,8 @@ step_pendulum_500u_near_default_wide() {  # the Pendulum target: step pendulum_5
       | tee "$d/summary.md"
 }
 step_pendulum_100u_near_default_wide() {  # the same at the paper's 100 units, against the default Φ at 100 units,
-  # the best earlier 100-unit Φ* (step pendulum_lr1e4) and the 500-unit one. 2026-11-26 here, on the 2 cores: ≈ 20
-  # min a generation (80 agents × 1M at ≈ 65k agent-steps/s), ≈ 1 h 40 min in all
+  # the best earlier 100-unit Φ* (step pendulum_lr1e4) and the 500-unit one. 2026-11-26/27 here, on the 2 cores: ≈ 20
+  # min a generation (80 agents × 1M at ≈ 65k agent-steps/s), ≈ 1 h 30 min in all
   local d=docs/data/pendulum-100u-near-default-wide t=docs/data/deterministic-eval/pendulum-100u-near-default-wide
   near_default_wide 100
   .venv/bin/python benchmarks/variant_summary.py "evolved near the default, 100 units=$t/summary.json" \
@@ -516,7 +516,7 @@ step_deterministic_eval() {  # the targets on rl-zoo's metric: the agents of the
   # shellcheck disable=SC2046
   train_saved "$d/pendulum-medium-500u" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 \
       $(phi_flags docs/data/reservoir-sizes-medium/studies.log reservoir-sizes-medium-pendulum-500u)
-  local s  # the other evolved Pendulum Φ*: at 500 units (steps pendulum_500u_near_default, pendulum_500u_lr1e4), 100
+  local s  # the other evolved Pendulum Φ*: steps pendulum_{500u,500u_wide,100u_wide}_near_default, pendulum{_500u,}_lr1e4
   for s in 500u-near-default 500u-near-default-wide 100u-near-default-wide 500u-lr1e-4 lr1e-4; do
     # shellcheck disable=SC2046
     train_saved "$d/pendulum-$s" --env PendulumNoVel-v1 --units "$(case $s in lr1e-4 | 100u-*) echo 100 ;; *) echo 500 ;; esac)" \
