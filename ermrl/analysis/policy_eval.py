@@ -72,8 +72,8 @@ def evaluate_runs(sources: dict[str, list[Path]], episodes: int = 10, first_seed
                     f"({spent:.0f} s, ≈ {spent / done * (total - done):.0f} s left)")
         rows += found
         evaluation, final = [r["evaluation"] for r in found], [r["final"] for r in found]  # final: None if diverged
-        cells = []
-        for s in (summarize(evaluation), on_final := summarize(final)):
+        cells, on_final = [], summarize(final)
+        for s in (summarize(evaluation), on_final):
             cells += ["—" if s.mean is None else f"{s.mean:.1f} ± {s.std:.1f}", format_ci(s.iqm, s.iqm_low, s.iqm_high)]
         # paired_difference leaves out the pairs of diverged agents itself, and needs 2 pairs left
         paired = str(paired_difference(evaluation, final)) if on_final.n - on_final.n_diverged >= 2 else "—"

@@ -23,7 +23,7 @@ class AgentState(NamedTuple):
     key: jax.Array
 
 
-def _kept_leaves(state: AgentState) -> list:
+def kept_leaves(state: AgentState) -> list:
     """The leaves of ``state`` that a snapshot keeps: all but the reservoirs' weights, which never change during
     training and are drawn again from the seeds and Φ on resume (at 1000 units they are 4 MB an agent)."""
     return jax.tree.leaves(state._replace(reservoirs=None))

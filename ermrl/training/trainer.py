@@ -24,7 +24,7 @@ from ermrl.training import snapshots
 from ermrl.training.config import Population, TrainConfig
 from ermrl.training.host_loop import HostIteration
 from ermrl.training.programs import programs_for
-from ermrl.training.state import AgentState, IterationLog, _kept_leaves
+from ermrl.training.state import AgentState, IterationLog, kept_leaves
 from ermrl.training.results import WALL_S, Policies, Results
 
 
@@ -128,7 +128,7 @@ class Trainer:
                                      self.n_iterations * steps_per_iter * n, elapsed, compile_s))
             if saver is not None and it + 1 < self.n_iterations:
                 saver(lambda: snapshots.Snapshot(
-                    it + 1, jax.device_get(_kept_leaves(state)), self.env.snapshot() if self.host else None,
+                    it + 1, jax.device_get(kept_leaves(state)), self.env.snapshot() if self.host else None,
                     finished, metrics, finite, compile_s, before + time.perf_counter() - t1))
         return finished, metrics, finite, state, before + time.perf_counter() - t1
 
