@@ -14,6 +14,10 @@ Wilcoxon p); A or B may also name a PPO row of the first test phase (e.g. "PPO (
 ``--figure PATH``, it also draws the variants' ER-MRL learning curves (mean ± std over the seeds) and the first
 test phase's PPO curves on one plot, from the ``curves.csv`` beside each ``summary.json``.
 
+A variant may join ``ermrl train`` runs of the same settings on other seeds, ``LABEL=RUN1.json,RUN2.json`` (e.g. the
+test seeds 1000-1009 and ten more, 1010-1019): their seeds are pooled in the table, the comparisons and the figure.
+Test phases cannot be joined (their summaries number their seeds from 1000).
+
 Example (C15):
     .venv/bin/python benchmarks/variant_summary.py \\
         "100 of 100=docs/data/observed-units-small/100-of-100/test/summary.json" \\
@@ -46,17 +50,54 @@ def read_rows(path: Path) -> tuple[dict, list[dict]]:
     return ermrl[0], [r for r in rows if r["kind"] == "PPO"]
 
 
-def _early_auc(summary: Path, steps: int = 300_000) -> float | None:
-    """The mean over seeds of an ``ermrl train`` run's learning curve over its first ``steps`` (as a test phase's
-    ``auc_early_mean``), from the ``curves.csv`` beside ``summary``; None without one."""
+def read_variant(paths: list[Path]) -> tuple[dict, list[dict]]:
+    """``read_rows`` of one summary, or of several ``ermrl train`` runs joined: one row of their pooled scores
+    (their seeds must differ) and AUC; no PPO rows."""
+    if len(paths) == 1:
+        return read_rows(paths[0])
+    scores, owner = {}, {}
+    for path in paths:
+        row, _ = read_rows(path)
+        if row["model"] is not None:
+            raise ValueError(f"{path} is a test phase's summary.json; only `ermrl train` runs (which record their "
+                             "seeds) can be joined with ','")
+        shared = sorted(set(row["scores"]) & set(scores))
+        if shared:
+            raise ValueError(f"{owner[shared[0]]} and {path} both have seed {shared[0]}; join runs of other seeds")
+        scores.update(row["scores"])
+        owner.update(dict.fromkeys(row["scores"], path))
+    return {"model": None, "kind": "ER-MRL", "scores": scores, "auc_early_mean": _early_auc(*paths)}, []
+
+
+def _train_curves(summaries: tuple[Path, ...]) -> tuple | None:
+    """(timesteps (I,), values (S, I)) of ``ermrl train`` runs, from the ``curves.csv`` beside each summary, the
+    runs' seeds stacked in their order; None if one has no curves.csv."""
     import numpy as np
 
     from ermrl.storage import read_curves_csv
 
-    path = summary.parent / "curves.csv"
-    if not path.is_file():
+    read = []
+    for summary in summaries:
+        path = summary.parent / "curves.csv"
+        if not path.is_file():
+            return None
+        (curve,) = read_curves_csv(path).values()
+        if read and not np.array_equal(curve[0], read[0][0]):
+            raise ValueError(f"{path} has other update steps than {summaries[0].parent / 'curves.csv'}; join runs "
+                             "of the same --timesteps")
+        read.append(curve)
+    return read[0][0], np.concatenate([values for _, values in read])
+
+
+def _early_auc(*summaries: Path, steps: int = 300_000) -> float | None:
+    """The mean over seeds of ``ermrl train`` runs' learning curves over their first ``steps`` (as a test phase's
+    ``auc_early_mean``), from the ``curves.csv`` beside each summary; None without one."""
+    import numpy as np
+
+    curve = _train_curves(summaries)
+    if curve is None:
         return None
-    (timesteps, values), = read_curves_csv(path).values()
+    timesteps, values = curve
     with np.errstate(all="ignore"):
         return float(np.nanmean(np.nanmean(values[:, timesteps <= steps], axis=1)))
 
@@ -71,8 +112,9 @@ def per_seed(row: dict) -> dict[int, float]:
     return {FIRST_TEST_SEED + i: float(v) for i, v in enumerate(row["per_seed"]) if v is not None}
 
 
-def table(variants: dict[str, Path], comparisons: list[tuple[str, str]]) -> str:
-    """The Markdown table of ``variants`` ({label: summary.json}) and the ``comparisons`` (pairs of labels)."""
+def table(variants: dict[str, list[Path]], comparisons: list[tuple[str, str]]) -> str:
+    """The Markdown table of ``variants`` ({label: [summary.json, ...]}) and the ``comparisons`` (pairs of
+    labels)."""
     from ermrl.analysis.statistics import format_ci, paired_difference, probability_of_improvement, summarize
 
     scores, lines = {}, ["| model | n | mean ± std | IQM [95% CI] | AUC 0–300k |", "|---|---|---|---|---|"]
@@ -83,8 +125,8 @@ def table(variants: dict[str, Path], comparisons: list[tuple[str, str]]) -> str:
         return f"| {name} | {s.n} | {s.mean:.1f} ± {s.std:.1f} | {format_ci(s.iqm, s.iqm_low, s.iqm_high)} | {auc} |"
 
     ppo_rows = None
-    for name, path in variants.items():
-        ermrl, ppo = read_rows(path)
+    for name, paths in variants.items():
+        ermrl, ppo = read_variant(paths)
         scores[name] = per_seed(ermrl)
         lines.append(line(f"ER-MRL, {name}", ermrl))
         ppo_rows = ppo if ppo_rows is None else ppo_rows
@@ -105,13 +147,22 @@ def table(variants: dict[str, Path], comparisons: list[tuple[str, str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def curves(variants: dict[str, Path]) -> dict[str, tuple]:
+def curves(variants: dict[str, list[Path]]) -> dict[str, tuple]:
     """{"ER-MRL, LABEL": (timesteps (I,), values (S, I))} of each variant's ER-MRL model, then the PPO curves of
     the first variant's test phase, read from the ``curves.csv`` beside each ``summary.json``."""
     from ermrl.storage import read_curves_csv
 
     out, ppo = {}, None
-    for label, path in variants.items():
+    for label, paths in variants.items():
+        if len(paths) > 1:  # joined `ermrl train` runs: their seeds stacked
+            read_variant(paths)  # refuses runs that cannot be joined
+            curve = _train_curves(tuple(paths))
+            if curve is None:
+                raise FileNotFoundError("No such file or directory: a curves.csv beside one of "
+                                        + ", ".join(map(str, paths)))
+            out[f"ER-MRL, {label}"] = curve
+            continue
+        path, = paths
         ermrl, rows = read_rows(path)
         read = read_curves_csv(path.parent / "curves.csv")
         if ermrl["model"] is None and len(read) == 1:  # an `ermrl train` run: its one model
@@ -124,17 +175,18 @@ def curves(variants: dict[str, Path]) -> dict[str, tuple]:
     return {**out, **(ppo or {})}
 
 
-def _variant(text: str) -> tuple[str, Path]:
-    label, sep, path = text.partition("=")
-    if not sep or not label or not path:
+def _variant(text: str) -> tuple[str, list[Path]]:
+    label, sep, paths = text.partition("=")
+    if not sep or not label or "" in paths.split(","):
         raise argparse.ArgumentTypeError(f"{text!r} is not LABEL=SUMMARY.json (e.g. '25 units=.../test/summary.json')")
-    return label, Path(path)
+    return label, [Path(path) for path in paths.split(",")]
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("variants", nargs="+", type=_variant, metavar="LABEL=SUMMARY.json",
-                        help="a variant's name and its test phase's summary.json")
+                        help="a variant's name and its test phase's summary.json, or `ermrl train` runs' "
+                             "summaries joined by ',' (their seeds pooled)")
     parser.add_argument("--compare", nargs=2, action="append", default=[], metavar=("A", "B"),
                         help="print P(A > B) and the paired difference A − B (repeatable); A or B: a variant's label "
                              "or a PPO row's model name, e.g. 'PPO (full observation)'")
@@ -154,7 +206,7 @@ def main(argv=None) -> int:
         if drawn is not None:
             from ermrl.analysis.plots import learning_curves
 
-            first = json.loads(args.variants[0][1].read_text())
+            first = json.loads(args.variants[0][1][0].read_text())
             env_id = (first if isinstance(first, dict) else first[0]).get("env_id", "")
             learning_curves(drawn, f"{env_id}: {args.title}", args.figure.with_suffix(".png"))
     except (OSError, ValueError) as e:

@@ -75,7 +75,7 @@ def test_figure_draws_each_variants_curve_and_the_ppo_curves(tmp_path):
     spec = importlib.util.spec_from_file_location("variant_summary", SCRIPT)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    drawn = module.curves({"100 units": small, "1000 units": large})
+    drawn = module.curves({"100 units": [small], "1000 units": [large]})
     assert list(drawn) == ["ER-MRL, 100 units", "ER-MRL, 1000 units", "PPO (same observation)"]
     np.testing.assert_array_equal(drawn["ER-MRL, 100 units"][0], [2048, 4096, 6144])
     np.testing.assert_array_equal(drawn["ER-MRL, 1000 units"][1], rising / 2)
@@ -131,6 +131,56 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
         done = _run(*args)
         assert done.returncode == 2, (args, done.stderr)
         last = done.stderr.strip().splitlines()[-1]  # after argparse's usage lines: the one-line error
+        assert last.startswith("variant_summary.py: error: ") and message in last, (args, done.stderr)
+        assert done.stdout == ""
+    assert not (tmp_path / "f.png").exists()
+
+
+def _train_run(folder: Path, scores: dict[int, float], curve: np.ndarray, steps=(2048, 4096, 6144)) -> Path:
+    """An `ermrl train` run's summary.json ({seed: final score}) and curves.csv (``curve``: (S, I) at ``steps``)."""
+    folder.mkdir(parents=True)
+    (path := folder / "summary.json").write_text(json.dumps(
+        {"env_id": "PendulumNoVel-v1", "seeds": list(scores), "fitness": list(scores.values())}))
+    storage.write_curves_csv(folder / "curves.csv", {"ER-MRL": (np.array(steps), curve)},
+                             {"ER-MRL": np.array(list(scores))})
+    return path
+
+
+def test_ermrl_train_runs_on_other_seeds_join_into_one_variant(tmp_path):
+    """'LABEL=A.json,B.json' pools two `ermrl train` runs' seeds (e.g. the test seeds and ten more): one row over
+    all of them, paired seed by seed with a test phase, their AUC over the stacked curves, one curve drawn."""
+    first = _train_run(tmp_path / "first", {1000: -300.0, 1001: -200.0},
+                       np.array([[-900.0, -500, -300], [-800, -400, -200]]))
+    more = _train_run(tmp_path / "more", {1002: -250.0, 1003: -150.0},
+                      np.array([[-700.0, -300, -250], [-600, -200, -150]]))
+    phase = _summary(tmp_path / "phase", [-350.0, -260.0, -240.0, -400.0])  # seeds 1000-1003
+    _curves(phase.parent, np.full((4, 3), -300.0))
+    pooled = [-300.0, -200.0, -250.0, -150.0]
+    done = _run(f"20 seeds={first},{more}", f"default={phase}", "--compare", "20 seeds", "default",
+                "--figure", tmp_path / "fig.png")
+    assert done.returncode == 0, done.stderr
+    s = summarize(pooled)
+    auc = np.mean([-900, -500, -300, -800, -400, -200, -700, -300, -250, -600, -200, -150])
+    assert f"| ER-MRL, 20 seeds | 4 | {s.mean:.1f} ± {s.std:.1f} | {format_ci(s.iqm, s.iqm_low, s.iqm_high)} | " \
+           f"{auc:.1f} |" in done.stdout
+    paired = paired_difference(pooled, [-350.0, -260.0, -240.0, -400.0])
+    assert f"paired 20 seeds − default over 4 seeds: {paired}" in done.stdout
+    assert (tmp_path / "fig.png").read_bytes()[:4] == b"\x89PNG"
+    overlapping = _train_run(tmp_path / "again", {1001: -100.0}, np.ones((1, 3)))
+    longer = _train_run(tmp_path / "longer", {1004: -100.0}, np.ones((1, 2)), steps=(2048, 8192))
+    cases = [
+        ((f"a={first},{overlapping}",), f"{first} and {overlapping} both have seed 1001; join runs of other seeds"),
+        ((f"a={first},{phase}",), f"{phase} is a test phase's summary.json; only `ermrl train` runs (which record "
+                                  "their seeds) can be joined with ','"),
+        ((f"a={first},{longer}", "--figure", tmp_path / "f.png"),
+         f"{longer.parent / 'curves.csv'} has other update steps than {first.parent / 'curves.csv'}; join runs of "
+         "the same --timesteps"),
+        ((f"a={first},",), f"'a={first},' is not LABEL=SUMMARY.json"),
+    ]
+    for args, message in cases:
+        done = _run(*args)
+        assert done.returncode == 2, (args, done.stderr)
+        last = done.stderr.strip().splitlines()[-1]
         assert last.startswith("variant_summary.py: error: ") and message in last, (args, done.stderr)
         assert done.stdout == ""
     assert not (tmp_path / "f.png").exists()
