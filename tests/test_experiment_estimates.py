@@ -52,7 +52,8 @@ def test_the_estimate_counts_the_selection_until_one_of_the_current_top_is_store
     assert runner.selection_left(q, None)
     r = cli(*[a for a in RUN if a != "--no-estimate"], "--out", str(evolved), *FLAGS)  # a rerun: all done
     assert r.returncode == 0, r.stderr
-    assert "estimated time: 0 min (rough: nominal throughput, 2 trials and 1 test phases already done)" in r.stdout
+    assert f"experiment {EXPERIMENT} at smoke scale: 1 study in " in r.stdout
+    assert "estimated time: 0 min (rough: nominal throughput, 2 trials and 1 test phase already done)" in r.stdout
 
 
 def test_the_estimate_counts_a_shared_baseline_once_and_a_stored_one_not_at_all(evolved, tmp_path):

@@ -61,6 +61,11 @@ def run_command(args) -> int:
     return _run(args)
 
 
+def _count(n: int, noun: str, plural: str | None = None) -> str:
+    """``n`` and ``noun`` in the number it takes: "1 study", "2 studies"."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
 def _study_label(spec) -> str:
     """A study's name, with the floor of its trial budget where it has one."""
     floor = spec.min_trial_timesteps
@@ -113,14 +118,14 @@ def _run(args) -> int:
                 unselected.discard(p.study)
         except KeyError:
             pass
-    print(f"experiment {experiment.name} at {scale.name} scale: {len(plans)} studies in {folder} "
+    print(f"experiment {experiment.name} at {scale.name} scale: {_count(len(plans), 'study', 'studies')} in {folder} "
           f"(storage {shown_url(url)})")
     if not args.no_estimate:
         finished = sum(len(p.tests) - len(left.get(p.study, p.tests)) for p in plans)
         seconds = runner.estimate_seconds(plans, done, left, args.baseline_store, budget.agents_per_run, unselected,
                                            table)
         print(f"estimated time: {seconds / 60:.0f} min (rough: nominal throughput, "
-              f"{sum(done.values())} trials and {finished} test phases already done)")
+              f"{_count(sum(done.values()), 'trial')} and {_count(finished, 'test phase')} already done)")
         if seconds >= 60 and (note := busy_note()):
             print(note)
 
