@@ -196,8 +196,9 @@ step_humanoid() {  # H3: Humanoid <-> HumanoidStandup, small evolution and test
   run generalization-humanoid small
 }
 step_c13() {  # C13: Humanoid and HumanoidStandup (348-dim observations, 17-dim actions) read through 2 reservoirs of 100
-  # units, small evolution on the task itself, test 5 × 200k (C12's budget) against PPO (Humanoid's from the store)
-  run locomotion small --only humanoid-2res humanoidstandup-2res
+  # units, small evolution on the task itself, test 10 seeds × 200k steps (C12's length) against PPO: ≈ 30 min a
+  # test phase here
+  run locomotion small --only humanoid-2res humanoidstandup-2res --test-seeds 10
   # each Φ* against PPO and against C12's Φ* evolved on the other task, on the same test seeds (C12 ran on an AVX2
   # host, this on an AVX-512 one: those pairs share their seeds, not their rollouts)
   local d=docs/data/locomotion-small g=docs/data/generalization-humanoid-small spec env study other from
