@@ -192,15 +192,15 @@ step_c16() {  # C16: K = 3 (and K = 1) reservoirs in the to-ant group (evolved o
       --compare "3 reservoirs" "2 reservoirs" --compare "1 reservoir" "2 reservoirs" \
       --figure "$d/curves.png" | tee "$d/summary.md"
 }
-step_humanoid() {  # H3: Humanoid <-> HumanoidStandup, small evolution and test
-  run generalization-humanoid small
+step_humanoid() {  # H3 / C12: Humanoid <-> HumanoidStandup, small evolution, test 10 seeds × 200k (the scale's length;
+  # the PPO baselines are C13's, from the store). ≈ 15-20 min a test model here
+  run generalization-humanoid small --test-seeds 10
 }
 step_c13() {  # C13: Humanoid and HumanoidStandup (348-dim observations, 17-dim actions) read through 2 reservoirs of 100
   # units, small evolution on the task itself, test 10 seeds × 200k steps (C12's length) against PPO: ≈ 30 min a
   # test phase here
   run locomotion small --only humanoid-2res humanoidstandup-2res --test-seeds 10
-  # each Φ* against PPO and against C12's Φ* evolved on the other task, on the same test seeds (C12 ran on an AVX2
-  # host, this on an AVX-512 one: those pairs share their seeds, not their rollouts)
+  # each Φ* against PPO and against C12's Φ* evolved on the other task, on the same 10 test seeds
   local d=docs/data/locomotion-small g=docs/data/generalization-humanoid-small spec env study other from
   for spec in Humanoid-v5:humanoid:standup-to-humanoid:HumanoidStandup \
               HumanoidStandup-v5:humanoidstandup:humanoid-to-standup:Humanoid; do
@@ -209,12 +209,28 @@ step_c13() {  # C13: Humanoid and HumanoidStandup (348-dim observations, 17-dim 
         "evolved on $from (C12)=$g/$other/test-$env/summary.json" \
         --compare "evolved on ${env%-v5}" "PPO (same observation)" \
         --compare "evolved on ${env%-v5}" "evolved on $from (C12)" \
-        --title "2 × 100 units for 348 obs dims, small, 5 × 200k" --figure "$d/c13-$study.png" | tee "$d/c13-$study.md"
+        --title "2 × 100 units for 348 obs dims, small, 10 × 200k" --figure "$d/c13-$study.png" | tee "$d/c13-$study.md"
   done
 }
 step_hpmap() {  # H3 / appendix: the top Φ of the locomotion studies on sr × lr
   "$E" analyze hp-map locomotion-small-ant-2res locomotion-small-halfcheetah-2res locomotion-small-swimmer-2res \
       --storage docs/data/locomotion-small/studies.log --out docs/data/locomotion-small/hp_map.png
+}
+step_c11() {  # C11: where each env's best Φ lie, once CMA-ES has room to move. 1 reservoir (sr, lr, iss evolved),
+  # 80 trials × 2 seeds × 50k steps per env: `small`'s trial budget with 80 trials instead of 18, so that CMA-ES
+  # (popsize 7) updates ≈ 10 times; the first 14 trials are the same Φ in every study (the sampler's fixed seed).
+  # Then the HP map of each study's top 10 and top 30 trials, with its leak-rate table (hp_map_topK.md: each study's
+  # lr against the others', Mann–Whitney). ≈ 70 min here (Ant ≈ 40), resumable
+  local d=docs/data/c11-hp-map env name top studies=()
+  for env in Ant-v5 HalfCheetah-v5 Swimmer-v5; do
+    name=c11-$(tr '[:upper:]' '[:lower:]' <<<"${env%-v5}")-1res
+    "$E" evolve --env "$env" --reservoirs 1 --trials 80 --seeds 2 --timesteps 50000 --study "$name" \
+        --storage "$d/studies.log" --out "runs/$name"
+    studies+=("$name")
+  done
+  for top in 10 30; do
+    "$E" analyze hp-map "${studies[@]}" --storage "$d/studies.log" --top "$top" --out "$d/hp_map_top$top.png"
+  done
 }
 step_observed_units() {  # C15: CartPoleNoVel reading 100 of 100, 1000 of 1000 and 100 of 1000 units; small
   # evolutions (iss fixed at 1.0), each Φ* tested 10 × 1M against PPO
@@ -615,7 +631,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do

@@ -35,15 +35,17 @@ import sys
 from pathlib import Path
 
 
-def read_rows(path: Path) -> tuple[dict, list[dict]]:
+def read_rows(path: Path, auc: bool = True) -> tuple[dict, list[dict]]:
     """(the ER-MRL row, the PPO rows) of a test phase's ``summary.json``, which must have one ER-MRL row; or of an
-    ``ermrl train`` run's (one model, no PPO rows; its row holds ``scores``, {seed: final score})."""
+    ``ermrl train`` run's (one model, no PPO rows; its row holds ``scores``, {seed: final score}, and, if ``auc``,
+    the AUC from the ``curves.csv`` beside it)."""
     rows = json.loads(path.read_text())
     if isinstance(rows, dict):
         if "seeds" not in rows or "fitness" not in rows:
             raise ValueError(f"{path} is neither a test phase's nor an `ermrl train` run's summary.json")
         scores = {int(s): float(f) for s, f in zip(rows["seeds"], rows["fitness"]) if f is not None and f == f}
-        return {"model": None, "kind": "ER-MRL", "scores": scores, "auc_early_mean": _early_auc(path)}, []
+        return {"model": None, "kind": "ER-MRL", "scores": scores,
+                "auc_early_mean": _early_auc(path) if auc else None}, []
     ermrl = [r for r in rows if r["kind"] == "ER-MRL"]
     if len(ermrl) != 1:
         raise ValueError(f"{path} has {len(ermrl)} ER-MRL rows; give a test phase of one learning rate")
@@ -55,9 +57,15 @@ def read_variant(paths: list[Path]) -> tuple[dict, list[dict]]:
     (their seeds must differ) and AUC; no PPO rows."""
     if len(paths) == 1:
         return read_rows(paths[0])
+    return {"model": None, "kind": "ER-MRL", "scores": _joined_scores(paths), "auc_early_mean": _early_auc(*paths)}, []
+
+
+def _joined_scores(paths: list[Path]) -> dict[int, float]:
+    """{seed: final score} of several ``ermrl train`` runs pooled; refuses a test phase's summary or a seed that
+    two runs share."""
     scores, owner = {}, {}
     for path in paths:
-        row, _ = read_rows(path)
+        row, _ = read_rows(path, auc=False)
         if row["model"] is not None:
             raise ValueError(f"{path} is a test phase's summary.json; only `ermrl train` runs (which record their "
                              "seeds) can be joined with ','")
@@ -66,7 +74,7 @@ def read_variant(paths: list[Path]) -> tuple[dict, list[dict]]:
             raise ValueError(f"{owner[shared[0]]} and {path} both have seed {shared[0]}; join runs of other seeds")
         scores.update(row["scores"])
         owner.update(dict.fromkeys(row["scores"], path))
-    return {"model": None, "kind": "ER-MRL", "scores": scores, "auc_early_mean": _early_auc(*paths)}, []
+    return scores
 
 
 def _train_curves(summaries: tuple[Path, ...]) -> tuple | None:
@@ -155,7 +163,7 @@ def curves(variants: dict[str, list[Path]]) -> dict[str, tuple]:
     out, ppo = {}, None
     for label, paths in variants.items():
         if len(paths) > 1:  # joined `ermrl train` runs: their seeds stacked
-            read_variant(paths)  # refuses runs that cannot be joined
+            _joined_scores(paths)  # refuses runs that cannot be joined
             curve = _train_curves(tuple(paths))
             if curve is None:
                 raise FileNotFoundError("No such file or directory: a curves.csv beside one of "

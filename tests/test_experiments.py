@@ -235,7 +235,10 @@ def test_every_experiment_runs_end_to_end_and_resumes(name, tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(registry.EXPERIMENTS))
 def test_every_experiment_runs_at_smoke_scale(name, tmp_path):
-    run_smoke(name, tmp_path)
+    text = run_smoke(name, tmp_path).read_text()
+    if registry.get(name).hp_map:  # the HP map across studies and its leak-rate table, one row per study
+        assert "HP map across studies" in text and "lr against the other studies of K reservoirs" in text
+        assert all(f"<td>{name}-smoke-{s.name}</td>" in text for s in registry.get(name).studies)
 
 
 def test_a_finished_test_phase_is_kept_across_new_test_config_fields(tmp_path):

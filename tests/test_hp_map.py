@@ -11,7 +11,8 @@ import optuna
 import pytest
 from optuna.trial import TrialState, create_trial
 
-from ermrl.analysis.hp_map import CSV_HEADER, cross_study_hp_map, hp_map_points, points_csv
+from ermrl.analysis.hp_map import (CSV_HEADER, StudyPoints, cross_study_hp_map, hp_map_points, leak_rate_table,
+                                   points_csv)
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
@@ -92,7 +93,13 @@ def test_cli_draws_the_top_30_of_each_study_in_two_panels(journal, tmp_path):
     out = tmp_path / "figs" / "hp.png"
     r = ermrl("analyze", "hp-map", "cp-1res", "pd-1res", "both-2res", "--storage", journal, "--out", str(out))
     assert r.returncode == 0, r.stderr
-    assert f"wrote {out} and {out.with_suffix('.csv')}" in r.stdout
+    assert f"wrote {out}, {out.with_suffix('.csv')} and {out.with_suffix('.md')}" in r.stdout
+    table = out.with_suffix(".md").read_text()
+    assert table.startswith("Top 30 trials of each study") and table.split("\n\n", 1)[1] in r.stdout
+    rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines() if line.startswith("| cp-1res")
+            or line.startswith("| pd-1res") or line.startswith("| both-2res")}
+    assert "| CartPoleNoVel-v1 | 1 | 30 |" in rows["cp-1res"] and "| PendulumNoVel-v1 | 1 | 12 |" in rows["pd-1res"]
+    assert rows["both-2res"].endswith("| — (no other study of this K) |")  # the only 2-reservoir study
     assert out.read_bytes()[:8] == PNG_MAGIC
     height, width, _ = matplotlib.image.imread(out).shape
     assert 400 < height < 800 and width > 1.8 * height  # two panels side by side
@@ -165,3 +172,26 @@ def test_help():
     for flag in ("STUDY", "--storage", "--top", "--out"):
         assert flag in r.stdout, flag
     assert "analyze" in ermrl("--help").stdout and "hp-map" in ermrl("analyze", "--help").stdout
+
+
+def points(name: str, lr: list[list[float]], sr: float = 1.0) -> StudyPoints:
+    """A study's top trials with the given leak rates, (N, K), and one spectral radius."""
+    lr = np.array(lr, np.float64)
+    return StudyPoints(study=name, envs=(f"{name}-v5",), trials=np.arange(len(lr)),
+                       fitness=-np.arange(len(lr), dtype=float), sr=np.full(lr.shape, sr), lr=lr,
+                       bounds={"sr": (0.01, 10), "lr": (0.01, 1)})
+
+
+def test_leak_rate_table_names_the_study_whose_leak_rates_are_lower():
+    """Five trials of 'ant' all below the six of the two other studies: the exact two-sided Mann–Whitney p of a
+    complete separation of 5 against 6 is 2 / C(11, 5) = 2 / 462."""
+    table = leak_rate_table([points("ant", [[0.01], [0.02], [0.03], [0.04], [0.05]]),
+                             points("cheetah", [[0.2], [0.4], [0.6]], sr=2.0), points("swimmer", [[0.3], [0.5], [0.7]]),
+                             points("two", [[0.1, 0.5], [0.3, 0.9]])])
+    rows = {line.split(" | ")[0].strip("| "): line for line in table.splitlines()[2:]}
+    assert rows["ant"] == ("| ant | ant-v5 | 1 | 5 | 1 | 0.03 | lower (median 0.03 vs 0.45), "
+                           "Mann–Whitney p = 0.0043, 5 vs 6 reservoirs |")
+    assert "| cheetah-v5 | 1 | 3 | 2 | 0.4 | higher (median 0.4 vs 0.045)" in rows["cheetah"]
+    assert rows["two"] == "| two | two-v5 | 2 | 2 | 1 (1 / 1) | 0.4 (0.2 / 0.7) | — (no other study of this K) |"
+    same = leak_rate_table([points("a", [[0.1], [0.2], [0.3]]), points("b", [[0.1], [0.2], [0.3]])])
+    assert "| a | a-v5 | 1 | 3 | 1 | 0.2 | the same median (median 0.2 vs 0.2), Mann–Whitney p = 1, 3 vs 3 reservoirs |" in same

@@ -96,6 +96,53 @@ def hp_map_points(studies: list[optuna.Study], top: int = 30) -> list[StudyPoint
     return [study_points(s, top) for s in studies]
 
 
+LEAK_RATE_HEADER = ["study", "envs", "K", "top trials", "median sr", "median lr",
+                    "lr against the other studies of K reservoirs"]
+
+
+def leak_rate_rows(series: list[StudyPoints]) -> list[list[str]]:
+    """One row (``LEAK_RATE_HEADER``) per study: where its top trials lie, their median sr and lr (every
+    reservoir pooled, then per reservoir when K > 1), and whether their leak rates are lower or higher than those
+    of the other studies with the same K pooled (two-sided Mann–Whitney U test over every reservoir's lr; the
+    paper's claim that Ant's top Φ form a cluster of lower leak rates)."""
+    from scipy import stats
+
+    def medians(s: StudyPoints, values: np.ndarray) -> str:
+        pooled = f"{np.median(values):.3g}"
+        if s.reservoirs == 1:
+            return pooled
+        return pooled + " (" + " / ".join(f"{np.median(values[:, r]):.3g}" for r in range(s.reservoirs)) + ")"
+
+    rows = []
+    for s in series:
+        others = [o.lr.ravel() for o in series if o is not s and o.reservoirs == s.reservoirs]
+        if others:
+            rest = np.concatenate(others)
+            p = stats.mannwhitneyu(s.lr.ravel(), rest, alternative="two-sided").pvalue
+            mine, theirs = np.median(s.lr), np.median(rest)
+            side = "lower" if mine < theirs else "higher" if mine > theirs else "the same median"
+            contrast = (f"{side} (median {mine:.3g} vs {theirs:.3g}), Mann–Whitney p = "
+                        f"{p:.2g}, {s.lr.size} vs {rest.size} reservoirs")
+        else:
+            contrast = "— (no other study of this K)"
+        rows.append([s.study, s.env, str(s.reservoirs), str(len(s.trials)), medians(s, s.sr), medians(s, s.lr),
+                     contrast])
+    return rows
+
+
+def leak_rate_table(series: list[StudyPoints]) -> str:
+    """:func:`leak_rate_rows` as a Markdown table."""
+    lines = ["| " + " | ".join(LEAK_RATE_HEADER) + " |", "|" + "---|" * len(LEAK_RATE_HEADER)]
+    lines += ["| " + " | ".join(row) + " |" for row in leak_rate_rows(series)]
+    return "\n".join(lines) + "\n"
+
+
+def summary_path(path: Path | str) -> Path:
+    """Where :func:`cross_study_hp_map` writes the :func:`leak_rate_table` of figure ``path``: the same name
+    ending in .md."""
+    return Path(path).with_suffix(".md")
+
+
 def points_csv(path: Path | str) -> Path:
     """Where :func:`cross_study_hp_map` writes the points of figure ``path``: the same name ending in .csv."""
     return Path(path).with_suffix(".csv")
@@ -103,8 +150,9 @@ def points_csv(path: Path | str) -> Path:
 
 def cross_study_hp_map(studies: list[optuna.Study], path: Path | str, top: int = 30) -> Path:
     """Draws the ``top`` trials of each study on sr × lr (log-log), one colour per env, one panel per K; writes
-    the figure to ``path`` (its suffix picks the format, .png by default) and the points drawn to
-    :func:`points_csv` (columns ``CSV_HEADER``, one row per reservoir of a trial). Returns ``path``."""
+    the figure to ``path`` (its suffix picks the format, .png by default), the points drawn to
+    :func:`points_csv` (columns ``CSV_HEADER``, one row per reservoir of a trial) and their
+    :func:`leak_rate_table` to :func:`summary_path`. Returns ``path``."""
     if not studies:
         raise ConfigError("the HP map needs at least one study")
     series = hp_map_points(studies, top)
@@ -146,4 +194,6 @@ def cross_study_hp_map(studies: list[optuna.Study], path: Path | str, top: int =
         [s.study, "+".join(s.envs), s.reservoirs, rank + 1, int(n), repr(float(v)), r + 1, repr(float(s.sr[rank, r])),
          repr(float(s.lr[rank, r]))]
         for s in series for rank, (n, v) in enumerate(zip(s.trials, s.fitness)) for r in range(s.reservoirs)))
+    storage.write_text(summary_path(path), f"Top {top} trials of each study (`ermrl analyze hp-map`)\n\n"
+                       + leak_rate_table(series))
     return path

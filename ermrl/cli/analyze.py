@@ -136,7 +136,7 @@ def cmd_hp_map(args) -> int:
     import optuna
 
     from ermrl import storage
-    from ermrl.analysis.hp_map import cross_study_hp_map, points_csv
+    from ermrl.analysis.hp_map import cross_study_hp_map, points_csv, summary_path
 
     if args.top < 1:
         raise ConfigError(f"--top must be >= 1, got {args.top}")
@@ -148,7 +148,8 @@ def cmd_hp_map(args) -> int:
     for name in dict.fromkeys(args.studies):  # each study once, in the given order
         studies.append(_load(name, args.storage))
     path = cross_study_hp_map(studies, args.out, args.top)
-    print(f"wrote {path} and {points_csv(path)} (top {args.top} trials of {len(studies)} "
+    print(summary_path(path).read_text(encoding="utf-8"))
+    print(f"wrote {path}, {points_csv(path)} and {summary_path(path)} (top {args.top} trials of {len(studies)} "
           f"stud{'ies' if len(studies) > 1 else 'y'})")
     return 0
 
