@@ -25,14 +25,17 @@ def add_parser(sub, formatter) -> None:
                                      "rate (log axes), one colour per env, circles for 1-reservoir studies and, in a "
                                      "second panel for 2-reservoir studies, circles for reservoir 1 and triangles for "
                                      "reservoir 2 (paper appendix, HP map). The points drawn go to a CSV beside the "
-                                     "figure.", formatter_class=formatter)
+                                     "figure, and a leak-rate table (each study's median sr and lr, and a "
+                                     "Mann–Whitney test of its leak rates against the other studies' of the same K) "
+                                     "to a .md beside it, also printed.", formatter_class=formatter)
     hp.add_argument("studies", nargs="+", metavar="STUDY", help="study names, as given to or printed by `ermrl evolve`")
     hp.add_argument("--storage", default=None,
                     help="Optuna storage URL or journal file holding every study (default: each study's sqlite in "
                          "runs/STUDY)")
     hp.add_argument("--top", type=int, default=30, help="best completed trials drawn per study")
     hp.add_argument("--out", type=Path, required=True, metavar="FIG.png",
-                    help="figure path (.png, .svg or .pdf); FIG.csv beside it holds the points drawn")
+                    help="figure path (.png, .svg or .pdf); FIG.csv beside it holds the points drawn, FIG.md "
+                         "the leak-rate table")
     options.add_config_option(hp)
 
     pr = asub.add_parser("probe", help="R² of a ridge readout of the reservoir: deleted velocities, o_(t+k)",
