@@ -220,7 +220,7 @@ step_c11() {  # C11: where each env's best Φ lie, once CMA-ES has room to move.
   # 80 trials × 2 seeds × 50k steps per env: `small`'s trial budget with 80 trials instead of 18, so that CMA-ES
   # (popsize 7) updates ≈ 10 times; the first 14 trials are the same Φ in every study (the sampler's fixed seed).
   # Then the HP map of each study's top 10 and top 30 trials, with its leak-rate table (hp_map_topK.md: each study's
-  # lr against the others', Mann–Whitney). ≈ 70 min here (Ant ≈ 40), resumable
+  # lr against the others', Mann–Whitney). ≈ 70 min here (Ant ≈ 40), resumable; then Ant from another start
   local d=docs/data/c11-hp-map env name top studies=()
   for env in Ant-v5 HalfCheetah-v5 Swimmer-v5; do
     name=c11-$(tr '[:upper:]' '[:lower:]' <<<"${env%-v5}")-1res
@@ -231,6 +231,10 @@ step_c11() {  # C11: where each env's best Φ lie, once CMA-ES has room to move.
   for top in 10 30; do
     "$E" analyze hp-map "${studies[@]}" --storage "$d/studies.log" --top "$top" --out "$d/hp_map_top$top.png"
   done
+  # Ant again from another start: the sampler's seed 1 draws other first Φ (56 trials, ≈ 30 min; its own journal)
+  "$E" evolve --env Ant-v5 --reservoirs 1 --trials 56 --seeds 2 --timesteps 50000 --sampler-seed 1 \
+      --study c11-ant-1res-sampler1 --storage "$d/sampler1.log" --out runs/c11-ant-1res-sampler1
+  "$E" analyze hp-map c11-ant-1res-sampler1 --storage "$d/sampler1.log" --top 30 --out "$d/sampler1_top30.png"
 }
 step_observed_units() {  # C15: CartPoleNoVel reading 100 of 100, 1000 of 1000 and 100 of 1000 units; small
   # evolutions (iss fixed at 1.0), each Φ* tested 10 × 1M against PPO
