@@ -11,7 +11,7 @@ import numpy as np
 from ermrl import storage
 from ermrl.analysis import statistics
 from ermrl.analysis.html import img, page, table
-from ermrl.analysis.hp_map import LEAK_RATE_HEADER, cross_study_hp_map, hp_map_points, leak_rate_rows
+from ermrl.analysis.hp_map import LEAK_RATE_HEADER, draw_hp_map, hp_map_points, leak_rate_rows
 from ermrl.analysis.report import ranked, test_dirs, test_phase_section
 
 def normalized_test_scores(rows_by_env: dict[str, list[dict]], random_returns: dict[str, float]) -> dict[str, np.ndarray]:
@@ -72,9 +72,10 @@ def write_experiment_report(experiment, scale, plans, storage_url: str, folder: 
                   table(["model", "IQM of nScore [95% CI]"], [[m, statistics.format_ci(*v, digits=2)] for m, v in agg.items()]),
                   img(statistics.performance_profile(scores, folder / "performance_profile.png"), "performance profile")]
     if experiment.hp_map and studies:
+        series = hp_map_points(studies)  # read once: the map and its leak-rate table
         parts += ["<h2>HP map across studies</h2>",
-                  img(cross_study_hp_map(studies, folder / "hp_map_across_studies.png"), "HP map"),
-                  table(LEAK_RATE_HEADER, leak_rate_rows(hp_map_points(studies)))]
+                  img(draw_hp_map(series, folder / "hp_map_across_studies.png"), "HP map"),
+                  table(LEAK_RATE_HEADER, leak_rate_rows(series))]
     for p in plans:
         sections = [s for d in test_dirs(p.run_dir) for s in test_phase_section(d, p.run_dir)]
         if sections:

@@ -155,7 +155,11 @@ def cross_study_hp_map(studies: list[optuna.Study], path: Path | str, top: int =
     :func:`leak_rate_table` to :func:`summary_path`. Returns ``path``."""
     if not studies:
         raise ConfigError("the HP map needs at least one study")
-    series = hp_map_points(studies, top)
+    return draw_hp_map(hp_map_points(studies, top), path, top)
+
+
+def draw_hp_map(series: list[StudyPoints], path: Path | str, top: int = 30) -> Path:
+    """:func:`cross_study_hp_map` of points already read (``hp_map_points(studies, top)``). Returns ``path``."""
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower() or "png"
     ks = sorted({s.reservoirs for s in series})
