@@ -6,8 +6,10 @@ from __future__ import annotations
 import argparse
 import errno
 import os
+import signal
 import sys
 import traceback
+from typing import NoReturn
 
 import ermrl
 from ermrl.errors import ConfigError, RunFailed
@@ -107,6 +109,16 @@ def _write_refused(e: BaseException | None) -> str | None:
     return None
 
 
+def _leave(code: int, why: str) -> NoReturn:
+    """Ends the process at once after Ctrl-C or SIGTERM, once a worker gave its trials back: XLA's threads may
+    still be running a computation, and the interpreter's teardown races them (seen as "pure virtual method called",
+    SIGABRT or SIGSEGV instead of the exit status a scheduler expects)."""
+    print(why, file=sys.stderr)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
 def main(argv: list[str] | None = None) -> int:
     from ermrl.cli import analyze, commands, dashboard, experiment, video
 
@@ -133,8 +145,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{command}: error: {e}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+        _leave(130, "interrupted")
+    except SystemExit as e:
+        if e.code != 128 + signal.SIGTERM:  # argparse's --help and usage errors
+            raise
+        _leave(e.code, "terminated (SIGTERM)")
     except BrokenPipeError:  # output piped into a command that stopped reading (e.g. `| head`)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1

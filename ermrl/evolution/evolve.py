@@ -158,6 +158,7 @@ def evolve(study: optuna.Study, config: EvolveConfig, trainers: dict[str, Traine
             results = {}
             for env_id, trainer in trainers.items():
                 def report(p: Progress, env_id=env_id):
+                    me.check_terminated()
                     if progress_fn is not None:
                         progress_fn(GenerationProgress(claim.generation, env_id, claim.completed, config.trials,
                                                        *_best(study), p))

@@ -9,12 +9,13 @@ waits, polling, while the generation is full or the last trials run elsewhere, u
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import signal
 import threading
 import time
 import warnings
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 import optuna
@@ -82,9 +83,8 @@ def worker_seed(seed: int | None, index: int) -> int | None:
     return int(np.random.SeedSequence([seed, index]).generate_state(1)[0])
 
 
-def _terminate(signum, frame):
-    """SIGTERM as an exception while a worker holds trials, so that it fails them on the way out (exit 143)."""
-    raise SystemExit(128 + signum)
+TERMINATED = 128 + signal.SIGTERM
+"""The exit status of a worker stopped by SIGTERM (143, as a shell reports a process killed by it)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,7 +105,9 @@ class Worker:
     """Claims trials of ``study`` for ``config`` (``claim``), keeps them alive while they train, and fails the
     ones it still holds when it stops early (reason "interrupted": Ctrl-C, SIGTERM; else the error's type). As a
     context manager in the main thread, it turns SIGTERM (where nothing else handles it) into ``SystemExit(143)``
-    for its lifetime."""
+    for its lifetime, and remembers it (``terminated``): Python drops an exception raised where nobody can catch
+    it (a garbage collector's callback, a ``__del__``), and a library's clean-up may replace it with its own error,
+    so ``claim``, ``check_terminated`` and the way out raise it again."""
 
     def __init__(self, study: optuna.Study, config: EvolveConfig, worker: WorkerConfig,
                  log: Callable[[str], None] = lambda line: None):
@@ -118,23 +120,49 @@ class Worker:
                                                                               worker.grace_period)
         self.heartbeat = Heartbeat(study, self.interval_s, log)
         self._warned_index = False
+        self.terminated = self._deferring = False
 
     def __enter__(self) -> "Worker":
-        self._sigterm = None
+        self._sigterm, self.terminated = None, False
         if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
-            self._sigterm = signal.signal(signal.SIGTERM, _terminate)  # e.g. slurm's time limit or scancel
+            self._sigterm = signal.signal(signal.SIGTERM, self._terminate)  # e.g. slurm's time limit or scancel
         self.heartbeat.start()
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
             if self.heartbeat.trial_ids:
-                stopped = exc_type is None or issubclass(exc_type, (KeyboardInterrupt, SystemExit))
+                stopped = self.terminated or exc_type is None or issubclass(exc_type, (KeyboardInterrupt, SystemExit))
                 self.release(INTERRUPTED if stopped else f"worker error ({exc_type.__name__})")
         finally:
             self.heartbeat.stop()
             if self._sigterm is not None:
                 signal.signal(signal.SIGTERM, self._sigterm)
+        if self.terminated and not isinstance(exc, SystemExit):  # dropped, or replaced by a clean-up's error
+            raise SystemExit(TERMINATED) from exc
+
+    def _terminate(self, signum, frame) -> None:
+        """SIGTERM as an exception, so that the worker fails its trials on the way out (exit 143); inside
+        ``_uninterrupted``, at its end."""
+        self.terminated = True
+        if not self._deferring:
+            raise SystemExit(TERMINATED)
+
+    @contextlib.contextmanager
+    def _uninterrupted(self) -> Iterator[None]:
+        """A block that SIGTERM does not cut: between creating a trial and beating for it, a worker stopped would
+        leave it RUNNING with no heartbeat, for the others to fail only after the grace period."""
+        self._deferring = True
+        try:
+            yield
+        finally:
+            self._deferring = False
+        self.check_terminated()
+
+    def check_terminated(self) -> None:
+        """Raises ``SystemExit(143)`` if SIGTERM came, even where its first exception was dropped."""
+        if self.terminated:
+            raise SystemExit(TERMINATED)
 
     def release(self, reason: str) -> None:
         """Fails every trial this worker still holds, so that nobody waits for them."""
@@ -155,6 +183,7 @@ class Worker:
         """The next trials to train, or None once the study holds ``config.trials`` completed trials."""
         waiting = None
         while True:
+            self.check_terminated()
             trials = self._trials()
             completed = sum(t.state == TrialState.COMPLETE for t in trials)
             if completed >= self.config.trials:
@@ -197,11 +226,11 @@ class Worker:
         None when none fits."""
         asked = []
         for _ in range(n):
-            with warnings.catch_warnings():  # Optuna's heartbeats are meant for Study.optimize; ours beat by hand
-                warnings.filterwarnings("ignore", message="Heartbeat of storage")
+            with self._uninterrupted(), warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message="Heartbeat of storage")  # meant for Study.optimize
                 trial = self.study.ask()
-            if self._survives(trial, self._adopt):
-                asked.append(trial)
+                if self._survives(trial, self._adopt):
+                    asked.append(trial)
         phis = {}
         for t in asked:
             if self._survives(t, lambda t: phis.__setitem__(t.number, _suggest(self.config.space, t))) \
