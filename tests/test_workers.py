@@ -236,7 +236,6 @@ def test_sigterm_fails_the_workers_own_trials(postgres_url, tmp_path, compiled_o
     code = proc.wait(timeout=300)
     err = (tmp_path / "worker0.err").read_text()
     assert code == 143 and "Traceback" not in err, f"exit {code}: {err}"
-
     trials = {t.number: t for t in study.get_trials(deepcopy=False)}
     assert not [t for t in trials.values() if t.state == TrialState.RUNNING]
     assert {trials[t.number].user_attrs.get("failure") for t in held} == {"interrupted"}
