@@ -2,6 +2,10 @@
 go on for a reason that is not a bug (exit code 1)."""
 
 
+TERMINATED = 143
+"""The exit status of a command stopped by SIGTERM (128 + 15, as a shell reports a process killed by it)."""
+
+
 class ConfigError(ValueError):
     """Bad input from the user (unknown env id, bad bounds, bad storage URL, ...).
 

@@ -21,6 +21,7 @@ import optuna  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
 from ermrl import storage  # noqa: E402
+from ermrl.analysis.html import markdown_table  # noqa: E402
 from ermrl.analysis.report import phi, ranked  # noqa: E402
 from ermrl.errors import ConfigError  # noqa: E402
 from ermrl.evolution.study import ATTR  # noqa: E402
@@ -132,9 +133,7 @@ def leak_rate_rows(series: list[StudyPoints]) -> list[list[str]]:
 
 def leak_rate_table(series: list[StudyPoints]) -> str:
     """:func:`leak_rate_rows` as a Markdown table."""
-    lines = ["| " + " | ".join(LEAK_RATE_HEADER) + " |", "|" + "---|" * len(LEAK_RATE_HEADER)]
-    lines += ["| " + " | ".join(row) + " |" for row in leak_rate_rows(series)]
-    return "\n".join(lines) + "\n"
+    return markdown_table(LEAK_RATE_HEADER, leak_rate_rows(series))
 
 
 def summary_path(path: Path | str) -> Path:

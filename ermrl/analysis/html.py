@@ -1,4 +1,5 @@
-"""Self-contained HTML pieces shared by the study and experiment reports (images embedded as base64)."""
+"""Self-contained HTML pieces shared by the study and experiment reports (images embedded as base64), and the
+Markdown table that the analyses write beside their figures."""
 
 from __future__ import annotations
 
@@ -27,6 +28,12 @@ def table(header: list[str], rows: list[list]) -> str:
         f'<td class="n">{html.escape(fmt(c))}</td>' if isinstance(c, (int, float)) and not isinstance(c, bool)
         else f"<td>{html.escape(fmt(c))}</td>" for c in row) + "</tr>" for row in rows)
     return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def markdown_table(header: list[str], rows: list[list[str]]) -> str:
+    """A Markdown table of ``rows`` (cells already formatted) under ``header``, ending in a newline."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows]) + "\n"
 
 
 def img(path: Path, alt: str) -> str:

@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ermrl.agent import Agent, AgentConfig, Phi
+from ermrl.analysis.html import markdown_table
 from ermrl.envs import masking
 from ermrl.envs.host_backend import describe
 from ermrl.envs.host_groups import make_gymnasium
@@ -263,14 +264,14 @@ def probe_table(results: list[ProbeResult]) -> str:
     horizon = max(len(r.r2_future) for r in results)
     head = ["reservoir", "sr", "lr", "iss", *(f"R² v[{d}]" for d in dims), "R² velocities",
             *(f"R² o(t+{k})" for k in range(1, horizon + 1))]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    rows = []
     for r in results:
         future = [f"{v:.3f}" for v in r.r2_future] + [""] * (horizon - len(r.r2_future))
         per_dim = [f"{v:.3f}" for v in r.r2_velocity_per_dim] if r.velocity_dims == dims else [""] * len(dims)
         cells = [r.label, *("/".join(f"{float(v):.3g}" for v in f) for f in as_k(r.phi)), *per_dim, f"{r.r2_velocity:.3f}",
                  *future]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append(cells)
+    return markdown_table(head, rows)
 
 
 def plot_probe(results: list[ProbeResult], path: Path | str) -> Path:

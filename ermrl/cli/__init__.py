@@ -6,13 +6,12 @@ from __future__ import annotations
 import argparse
 import errno
 import os
-import signal
 import sys
 import traceback
 from typing import NoReturn
 
 import ermrl
-from ermrl.errors import ConfigError, RunFailed
+from ermrl.errors import TERMINATED, ConfigError, RunFailed
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -147,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         _leave(130, "interrupted")
     except SystemExit as e:
-        if e.code != 128 + signal.SIGTERM:  # argparse's --help and usage errors
+        if e.code != TERMINATED:  # argparse's --help and usage errors
             raise
         _leave(e.code, "terminated (SIGTERM)")
     except BrokenPipeError:  # output piped into a command that stopped reading (e.g. `| head`)

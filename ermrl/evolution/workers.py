@@ -23,7 +23,7 @@ from optuna.exceptions import UpdateFinishedTrialError
 from optuna.trial import FrozenTrial, TrialState
 
 from ermrl.agent import Phi
-from ermrl.errors import ConfigError
+from ermrl.errors import TERMINATED, ConfigError
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.generations import ATTR, CMA_GENERATION, FULL, Ledger
 from ermrl.evolution.heartbeat import (GRACE_PERIOD_S, INTERRUPTED, INTERVAL_S, WORKER_ATTR, Heartbeat, WorkerId,
@@ -83,10 +83,6 @@ def worker_seed(seed: int | None, index: int) -> int | None:
     return int(np.random.SeedSequence([seed, index]).generate_state(1)[0])
 
 
-TERMINATED = 128 + signal.SIGTERM
-"""The exit status of a worker stopped by SIGTERM (143, as a shell reports a process killed by it)."""
-
-
 @dataclasses.dataclass(frozen=True)
 class Claim:
     """Trials this worker holds: asked, sampled and placed in their generation, to train as one population."""
@@ -123,7 +119,7 @@ class Worker:
         self.terminated = self._deferring = False
 
     def __enter__(self) -> "Worker":
-        self._sigterm, self.terminated = None, False
+        self._sigterm = None
         if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
             self._sigterm = signal.signal(signal.SIGTERM, self._terminate)  # e.g. slurm's time limit or scancel
         self.heartbeat.start()
