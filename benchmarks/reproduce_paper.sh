@@ -236,6 +236,20 @@ step_c11() {  # C11: where each env's best Φ lie, once CMA-ES has room to move.
       --study c11-ant-1res-sampler1 --storage "$d/sampler1.log" --out runs/c11-ant-1res-sampler1
   "$E" analyze hp-map c11-ant-1res-sampler1 --storage "$d/sampler1.log" --top 30 --out "$d/sampler1_top30.png"
 }
+step_c11_2res() {  # C11's right panel: the same evolutions as step c11 with 2 reservoirs (sr, lr, iss of each
+  # evolved: 6 dims, popsize 9, ≈ 8 CMA-ES updates in 80 trials), into the same journal, then the HP map of the six
+  # studies, 1 and 2 reservoirs side by side (circles and triangles: a trial's two reservoirs). ≈ 1.5-2 h here, resumable
+  local d=docs/data/c11-hp-map env name top studies=()
+  for env in HalfCheetah-v5 Swimmer-v5 Ant-v5; do
+    name=c11-$(tr '[:upper:]' '[:lower:]' <<<"${env%-v5}")-2res
+    "$E" evolve --env "$env" --reservoirs 2 --trials 80 --seeds 2 --timesteps 50000 --study "$name" \
+        --storage "$d/studies.log" --out "runs/$name"
+  done
+  for env in ant halfcheetah swimmer; do studies+=("c11-$env-1res" "c11-$env-2res"); done
+  for top in 10 30; do
+    "$E" analyze hp-map "${studies[@]}" --storage "$d/studies.log" --top "$top" --out "$d/hp_map_1and2res_top$top.png"
+  done
+}
 step_observed_units() {  # C15: CartPoleNoVel reading 100 of 100, 1000 of 1000 and 100 of 1000 units; small
   # evolutions (iss fixed at 1.0), each Φ* tested 10 × 1M against PPO
   run observed-units small "${TEST10[@]}"
@@ -630,6 +644,45 @@ step_deterministic_eval() {  # the targets on rl-zoo's metric: the agents of the
       --episodes 50 --out "$d/pendulum.md"
   "$E" analyze evaluate "$d"/cartpole-{fitness-1m,paper,ppo} --episodes 50 --out "$d/cartpole.md"
 }
+step_pendulum_rlzoo_ppo() {  # the Pendulum target, a diagnostic of its PPO settings: the target comes from
+  # rl-baselines3-zoo's RecurrentPPO on PendulumNoVel-v1, trained with that zoo's tuned settings for this env
+  # (hyperparams/ppo_lstm.yml: 4 envs × 1024 steps, gamma 0.9, GAE λ 0.95, 10 epochs, lr 1e-3, clip 0.2, no entropy
+  # bonus, gSDE; ermrl has no gSDE, so the rest is taken and the policy's noise stays state-independent). The same
+  # reservoirs as step deterministic_eval (the evolved 500- and 100-unit Φ* of the near-default studies, the default
+  # Φ at both sizes) and PPO, trained with those settings, once, on the test seeds 10 × 1M, then each paired seed by
+  # seed with its run at the paper's settings and evaluated on rl-zoo's metric. ≈ 8 min a 500-unit model here
+  local d=docs/data/pendulum-rlzoo-ppo e=docs/data/deterministic-eval s
+  local zoo=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2
+             --ent-coef 0.0)
+  for s in 500 100; do
+    # shellcheck disable=SC2046
+    train_saved "$d/evolved-${s}u" --env PendulumNoVel-v1 --units "$s" "${zoo[@]}" \
+        $(phi_flags "docs/data/pendulum-${s}u-near-default-wide/studies.log" "pendulum-${s}u-near-default-wide")
+    train_saved "$d/default-phi-${s}u" --env PendulumNoVel-v1 --units "$s" --sr 0.95 --lr 0.5 --iss 1.0 "${zoo[@]}"
+  done
+  train_saved "$d/ppo" --env PendulumNoVel-v1 --no-reservoir "${zoo[@]}"
+  train_saved "$d/ppo-full-obs" --env Pendulum-v1 --no-reservoir "${zoo[@]}"
+  .venv/bin/python benchmarks/variant_summary.py "evolved 500u, zoo=$d/evolved-500u/summary.json" \
+      "evolved 500u, paper=$e/pendulum-500u-near-default-wide/summary.json" \
+      "default Φ 500u, zoo=$d/default-phi-500u/summary.json" "default Φ 500u, paper=$e/pendulum-default-phi-500u/summary.json" \
+      "evolved 100u, zoo=$d/evolved-100u/summary.json" \
+      "evolved 100u, paper=$e/pendulum-100u-near-default-wide/summary.json" \
+      "default Φ 100u, zoo=$d/default-phi-100u/summary.json" "default Φ 100u, paper=$e/pendulum-default-phi/summary.json" \
+      "masked, zoo=$d/ppo/summary.json" "masked, paper=$e/pendulum-ppo/summary.json" \
+      "full obs, zoo=$d/ppo-full-obs/summary.json" \
+      --compare "evolved 500u, zoo" "evolved 500u, paper" --compare "default Φ 500u, zoo" "default Φ 500u, paper" \
+      --compare "evolved 100u, zoo" "evolved 100u, paper" --compare "default Φ 100u, zoo" "default Φ 100u, paper" \
+      --compare "masked, zoo" "masked, paper" --compare "evolved 500u, zoo" "default Φ 500u, zoo" \
+      --compare "evolved 100u, zoo" "default Φ 100u, zoo" \
+      | tee "$d/summary.md"
+  .venv/bin/python benchmarks/variant_summary.py "evolved 500u, zoo=$d/evolved-500u/summary.json" \
+      "evolved 500u, paper=$e/pendulum-500u-near-default-wide/summary.json" \
+      "default Φ 500u, zoo=$d/default-phi-500u/summary.json" "default Φ 500u, paper=$e/pendulum-default-phi-500u/summary.json" \
+      "full obs, zoo=$d/ppo-full-obs/summary.json" --title "rl-zoo's PPO settings (zoo) vs the paper's, 500 units" \
+      --figure "$d/pendulum.png" >/dev/null
+  "$E" analyze evaluate "$d"/{evolved-500u,default-phi-500u,evolved-100u,default-phi-100u,ppo,ppo-full-obs} \
+      --episodes 50 --out "$d/evaluation.md"
+}
 train_saved() {  # train_saved OUT ARGS...: `ermrl train ARGS` on the test seeds, 10 × 1M, agents saved in OUT/agents/
   # (episodes.csv is left out of the repository: the curves and the per-seed scores are in curves.csv and summary.json)
   [ -f "$1/summary.json" ] || "$E" train --seeds 10 --first-seed 1000 --timesteps 1000000 "${@:2}" --quiet --out "$1"
@@ -659,7 +712,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do

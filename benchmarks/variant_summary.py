@@ -44,7 +44,7 @@ def read_rows(path: Path, auc: bool = True) -> tuple[dict, list[dict]]:
         if "seeds" not in rows or "fitness" not in rows:
             raise ValueError(f"{path} is neither a test phase's nor an `ermrl train` run's summary.json")
         scores = {int(s): float(f) for s, f in zip(rows["seeds"], rows["fitness"]) if f is not None and f == f}
-        return {"model": None, "kind": "ER-MRL", "scores": scores,
+        return {"model": None, "kind": _run_kind(path), "scores": scores,
                 "auc_early_mean": _early_auc(path) if auc else None}, []
     ermrl = [r for r in rows if r["kind"] == "ER-MRL"]
     if len(ermrl) != 1:
@@ -52,12 +52,21 @@ def read_rows(path: Path, auc: bool = True) -> tuple[dict, list[dict]]:
     return ermrl[0], [r for r in rows if r["kind"] == "PPO"]
 
 
+def _run_kind(summary: Path) -> str:
+    """"PPO" for an ``ermrl train --no-reservoir`` run (its config.json has no reservoir), else "ER-MRL"."""
+    config = summary.parent / "config.json"
+    if config.is_file() and json.loads(config.read_text())["train"]["agent"]["reservoirs"] == 0:
+        return "PPO"
+    return "ER-MRL"
+
+
 def read_variant(paths: list[Path]) -> tuple[dict, list[dict]]:
     """``read_rows`` of one summary, or of several ``ermrl train`` runs joined: one row of their pooled scores
     (their seeds must differ) and AUC; no PPO rows."""
     if len(paths) == 1:
         return read_rows(paths[0])
-    return {"model": None, "kind": "ER-MRL", "scores": _joined_scores(paths), "auc_early_mean": _early_auc(*paths)}, []
+    return {"model": None, "kind": _run_kind(paths[0]), "scores": _joined_scores(paths),
+            "auc_early_mean": _early_auc(*paths)}, []
 
 
 def _joined_scores(paths: list[Path]) -> dict[int, float]:
@@ -136,7 +145,7 @@ def table(variants: dict[str, list[Path]], comparisons: list[tuple[str, str]]) -
     for name, paths in variants.items():
         ermrl, ppo = read_variant(paths)
         scores[name] = per_seed(ermrl)
-        lines.append(line(f"ER-MRL, {name}", ermrl))
+        lines.append(line(f"{ermrl['kind']}, {name}", ermrl))
         ppo_rows = ppo if ppo_rows is None else ppo_rows
     lines += [line(r["model"], r) for r in ppo_rows or []]
     lines.append("")
@@ -156,8 +165,9 @@ def table(variants: dict[str, list[Path]], comparisons: list[tuple[str, str]]) -
 
 
 def curves(variants: dict[str, list[Path]]) -> dict[str, tuple]:
-    """{"ER-MRL, LABEL": (timesteps (I,), values (S, I))} of each variant's ER-MRL model, then the PPO curves of
-    the first variant's test phase, read from the ``curves.csv`` beside each ``summary.json``."""
+    """{"ER-MRL, LABEL" ("PPO, LABEL" for a run without reservoir): (timesteps (I,), values (S, I))} of each
+    variant's model, then the PPO curves of the first variant's test phase, read from the ``curves.csv`` beside each
+    ``summary.json``."""
     from ermrl.storage import read_curves_csv
 
     out, ppo = {}, None
@@ -168,7 +178,7 @@ def curves(variants: dict[str, list[Path]]) -> dict[str, tuple]:
             if curve is None:
                 raise FileNotFoundError("No such file or directory: a curves.csv beside one of "
                                         + ", ".join(map(str, paths)))
-            out[f"ER-MRL, {label}"] = curve
+            out[f"{_run_kind(paths[0])}, {label}"] = curve
             continue
         path, = paths
         ermrl, rows = read_rows(path)
@@ -178,7 +188,7 @@ def curves(variants: dict[str, list[Path]]) -> dict[str, tuple]:
         if ermrl["model"] not in read:
             raise ValueError(f"{path.parent / 'curves.csv'} has no curve of {ermrl['model']!r}; give the curves.csv "
                              "written with this summary.json")
-        out[f"ER-MRL, {label}"] = read[ermrl["model"]]
+        out[f"{ermrl['kind']}, {label}"] = read[ermrl["model"]]
         ppo = {r["model"]: read[r["model"]] for r in rows if r["model"] in read} if ppo is None else ppo
     return {**out, **(ppo or {})}
 

@@ -42,6 +42,14 @@ CASES = [
     ("train --env-workers -1", "ermrl train: error: argument --env-workers: must be 'auto' or an integer >= 0, got "
                                "'-1'; see `ermrl train --help`"),
     ("train --ppo-lr nan", "ermrl train: error: learning rate nan is outside (0, 1); the paper uses 3e-4 or 1e-4"),
+    ("train --gamma 1.5", "ermrl train: error: gamma 1.5 is outside (0, 1]; SB3's default is 0.99"),
+    ("evolve --gae-lambda -0.1", "ermrl evolve: error: gae_lambda -0.1 is outside [0, 1]; SB3's default is 0.95"),
+    ("train --clip-range 0", "ermrl train: error: clip_range must be positive and finite, got 0.0; SB3's default is 0.2"),
+    ("baselines --env CartPole-v1 --ent-coef inf",
+     "ermrl baselines: error: ent_coef must be >= 0 and finite, got inf; SB3's default is 0.0"),
+    ("train --n-envs 4 --n-steps 1000 --batch-size 3000",
+     "ermrl train: error: batch_size 3000 must divide n_steps × n_envs = 4000; pick a divisor of 4000"),
+    ("train --n-epochs 0", "ermrl train: error: n_envs, n_steps, batch_size and n_epochs must all be >= 1"),
     ("train --reservoirs 2 --sr 1 2 3", "ermrl train: error: --sr got 3 values for 2 reservoirs; give one value or 2"),
     ("train --model lstm --skip-connection",
      "ermrl train: error: --skip-connection feeds the observation beside a reservoir's context, but --model lstm has "
@@ -77,11 +85,10 @@ CASES = [
                                 "did you mean 'units'?"),
     ("train --config evolvekey.toml",
      "ermrl train: error: config file evolvekey.toml: unknown option 'trials' for `ermrl train`; options here: "
-     "backend, bias, bias-scaling, env, env-workers, feed-action, first-seed, input-connectivity, iss, lr, lstm-hidden, "
-     "lstm-seq-len, model, no-reservoir, observed-units, out, ppo-lr, preset, quiet, rc-connectivity, reservoirs, "
-     "save-agents, seeds, skip-connection, snapshot-every, sr, "
-     "tensorboard, "
-     "timesteps, units"),
+     "backend, batch-size, bias, bias-scaling, clip-range, ent-coef, env, env-workers, feed-action, first-seed, "
+     "gae-lambda, gamma, input-connectivity, iss, lr, lstm-hidden, lstm-seq-len, max-grad-norm, model, n-envs, "
+     "n-epochs, n-steps, no-reservoir, observed-units, out, ppo-lr, preset, quiet, rc-connectivity, reservoirs, "
+     "save-agents, seeds, skip-connection, snapshot-every, sr, tensorboard, timesteps, units, vf-coef"),
     ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "
                                 "integer"),
     ("train --config float.toml", "ermrl train: error: config file float.toml: units must be an integer, got 2.5"),

@@ -105,6 +105,14 @@ def test_an_ermrl_train_run_is_a_variant_too(tmp_path):
     paired = paired_difference([scores[1000], scores[1001]], [300.0, 100.0])
     assert f"paired sparse − default over 2 seeds: {paired}" in done.stdout
     assert (tmp_path / "fig.png").read_bytes()[:4] == b"\x89PNG"
+    plain = tmp_path / "plain"  # a run without reservoir is named as PPO, not as ER-MRL
+    done = ermrl("train", "--no-reservoir", "--seeds", "2", "--first-seed", "1000", "--timesteps", "2048",
+                 "--no-save-agents", "--quiet", "--out", plain)
+    assert done.returncode == 0, done.stderr
+    done = _run(f"sparse={run / 'summary.json'}", f"masked={plain / 'summary.json'}", "--compare", "sparse", "masked")
+    assert done.returncode == 0, done.stderr
+    assert "| ER-MRL, sparse | 2 |" in done.stdout and "| PPO, masked | 2 |" in done.stdout
+    assert "ER-MRL, masked" not in done.stdout
     (bad := tmp_path / "bad.json").write_text(json.dumps({"seeds": [1000]}))
     done = _run(f"a={bad}")
     assert done.returncode == 2

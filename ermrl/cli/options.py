@@ -120,7 +120,10 @@ def _groups() -> dict[str, list[Option]]:
         "ppo": [Option("--preset", help="PPO settings: 'sb3' = stable-baselines3's defaults (the paper); "
                                         "'fast' = 8 envs, 4 epochs.", default="sb3", kwargs={"choices": ["sb3", "fast"]}),
                 Option("--ppo-lr", PPOConfig, "learning_rate", help="Default: the preset's (3e-4).",
-                       kwargs={"type": float, "default": None})],
+                       kwargs={"type": float, "default": None}),
+                *(Option(f"--{name.replace('_', '-')}", PPOConfig, name,
+                         help=f"Default: the preset's ({getattr(PPOConfig(), name)} in sb3).",
+                         kwargs={"type": kind, "default": None}) for name, kind in PPO_FIELDS.items())],
         "search": [Option("--trials", EvolveConfig, "trials", kwargs={"type": int}),
                    Option("--sampler", help="cmaes (Optuna's CmaEsSampler, the paper), random or tpe.",
                           default="cmaes"),
@@ -160,8 +163,14 @@ def _groups() -> dict[str, list[Option]]:
     }
 
 
+PPO_FIELDS = {"n_envs": int, "n_steps": int, "batch_size": int, "n_epochs": int, "gamma": float, "gae_lambda": float,
+              "clip_range": float, "ent_coef": float, "vf_coef": float, "max_grad_norm": float}
+"""The PPOConfig fields that have a flag of their own (``--gamma``, ``--n-steps``, ...), named as SB3's arguments;
+each overrides the preset's value, as ``--ppo-lr`` does (e.g. rl-baselines3-zoo's tuned settings for an env)."""
+
 AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connectivity", "bias_scaling", "feed_action",
-               "skip_connection", "observed_units", "preset", "ppo_lr", "timesteps", "backend", "env_workers")
+               "skip_connection", "observed_units", "preset", "ppo_lr", *PPO_FIELDS, "timesteps", "backend",
+               "env_workers")
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
 
@@ -199,7 +208,10 @@ def ppo_config(args):
     ppo = PRESETS[args.preset]
     if getattr(args, "model", "ff") == "lstm":  # the "model" options exist on `ermrl train` only
         ppo = dataclasses.replace(ppo, model="lstm", lstm_hidden_size=args.lstm_hidden, lstm_seq_len=args.lstm_seq_len)
-    return ppo if args.ppo_lr is None else dataclasses.replace(ppo, learning_rate=args.ppo_lr)
+    changes = {name: getattr(args, name) for name in PPO_FIELDS if getattr(args, name, None) is not None}
+    if args.ppo_lr is not None:
+        changes["learning_rate"] = args.ppo_lr
+    return dataclasses.replace(ppo, **changes) if changes else ppo
 
 
 def train_config(args, env_id: str, reservoirs: int | None = None):

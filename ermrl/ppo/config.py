@@ -24,11 +24,17 @@ class PPOConfig:
     learning_rate: float = 3e-4
     """Adam step size (the paper uses 1e-4 on partially observable tasks); constant, as in SB3."""
     gamma: float = 0.99
+    """Discount factor, in (0, 1]."""
     gae_lambda: float = 0.95
+    """GAE's λ, in [0, 1]: the bias–variance trade-off of the advantage estimate."""
     clip_range: float = 0.2
+    """PPO's clip ε of the probability ratio (constant, as SB3's default)."""
     ent_coef: float = 0.0
+    """Weight of the entropy bonus in the loss."""
     vf_coef: float = 0.5
+    """Weight of the value loss in the loss."""
     max_grad_norm: float = 0.5
+    """Global gradient-norm clip per minibatch."""
     adam_eps: float = 1e-5
     """Adam's epsilon (SB3 passes eps=1e-5 to torch.optim.Adam)."""
     normalize_advantage: bool = True
@@ -63,6 +69,18 @@ class PPOConfig:
             )
         if not (self.learning_rate > 0 and self.learning_rate < 1):
             raise ConfigError(f"learning rate {self.learning_rate} is outside (0, 1); the paper uses 3e-4 or 1e-4")
+        if not 0 < self.gamma <= 1:
+            raise ConfigError(f"gamma {self.gamma} is outside (0, 1]; SB3's default is 0.99")
+        if not 0 <= self.gae_lambda <= 1:
+            raise ConfigError(f"gae_lambda {self.gae_lambda} is outside [0, 1]; SB3's default is 0.95")
+        for name, default in (("clip_range", 0.2), ("max_grad_norm", 0.5)):
+            if not 0 < getattr(self, name) < float("inf"):
+                raise ConfigError(f"{name} must be positive and finite, got {getattr(self, name)}; SB3's default is "
+                                  f"{default}")
+        for name, default in (("ent_coef", 0.0), ("vf_coef", 0.5)):
+            if not 0 <= getattr(self, name) < float("inf"):
+                raise ConfigError(f"{name} must be >= 0 and finite, got {getattr(self, name)}; SB3's default is "
+                                  f"{default}")
         if self.model not in ("ff", "lstm"):
             raise ConfigError(f"model must be 'ff' or 'lstm', got {self.model!r}")
         if self.model == "lstm":
