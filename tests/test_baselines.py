@@ -1,5 +1,6 @@
 """Baselines of the normalized score: episodic constants from real envs, the table, and nScore arithmetic."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -45,6 +46,27 @@ def test_table_round_trip_user_over_shipped(tmp_path):
     assert bl.resolve("HalfCheetah-v5", 4096, 2, 3e-4, again) == bl.Baseline("HalfCheetah-v5", -1.5, -0.0015, 12.0)
 
 
+
+def test_ppo_entries_are_kept_apart_by_their_ppo_settings(tmp_path):
+    """An evolution with other PPO settings (--gamma, --n-steps, ...) normalizes by a PPO trained with them; an entry
+    written before settings were recorded is SB3's defaults."""
+    table = bl.load_table(tmp_path / "t.json")
+    table.add_ppo("E-v1", bl.PPOScore(2, 4096, 3e-4, 12.0, 1.0, (11.0, 13.0)), "cmd")
+    table.add_ppo("E-v1", bl.PPOScore(2, 4096, 3e-4, 30.0, 1.0, (29.0, 31.0), {"gamma": 0.9}), "cmd --gamma 0.9")
+    bl.save_table(table, tmp_path / "t.json")
+    saved = json.loads((tmp_path / "t.json").read_text())
+    del saved["ppo"][0]["settings"]  # as a table written before settings were recorded
+    (tmp_path / "t.json").write_text(json.dumps(saved))
+    again = bl.load_table(tmp_path / "t.json")
+    assert again.ppo("E-v1", 4096, 2, 3e-4).mean == 12.0
+    assert again.ppo("E-v1", 4096, 2, 3e-4, {"gamma": 0.9}).mean == 30.0
+    assert again.ppo("E-v1", 4096, 2, 3e-4, {"gamma": 0.8}) is None
+    from ermrl.ppo.config import FAST, SB3_DEFAULTS
+
+    assert bl.ppo_settings(SB3_DEFAULTS) == {} and bl.ppo_settings(dataclasses.replace(SB3_DEFAULTS, learning_rate=1e-4)) == {}
+    assert bl.ppo_settings(FAST) == {"n_envs": 8, "n_steps": 256, "batch_size": 512, "n_epochs": 4}
+
+
 def test_a_damaged_table_is_a_one_line_error(tmp_path):
     path = tmp_path / "t.json"
     path.write_text('{"random": [}')
@@ -57,7 +79,10 @@ def test_a_damaged_table_is_a_one_line_error(tmp_path):
 def test_ppo_fitness_trains_the_evolutions_seeds():
     p = bl.ppo_fitness("CartPole-v1", 2048, 2)
     assert len(p.per_seed) == 2 and all(v is not None and v > 5 for v in p.per_seed)
-    assert p.mean == pytest.approx(np.mean(p.per_seed))
+    assert p.mean == pytest.approx(np.mean(p.per_seed)) and p.settings == {}
+    other = bl.ppo_fitness("CartPole-v1", 2048, 2, settings={"n_envs": 2, "n_steps": 512, "gamma": 0.9})
+    assert other.settings == {"n_envs": 2, "n_steps": 512, "gamma": 0.9}
+    assert other.per_seed != p.per_seed  # the settings reach the training (same seeds; training is deterministic)
 
 
 def test_baselines_command_stores_both_constants_with_provenance(tmp_path):
@@ -81,3 +106,11 @@ def test_baselines_command_stores_both_constants_with_provenance(tmp_path):
     r = cli("baselines", "--env", "CartPole-v1", "--timesteps", "2048", "--seeds", "1", "--table", other, "--quiet")
     assert r.returncode == 0, r.stderr
     assert json.loads(other.read_text())["random"] == {} and "random agent" not in r.stdout
+    # other PPO settings are another entry, whose command names them
+    r = cli("baselines", "--env", "CartPole-v1", "--timesteps", "2048", "--seeds", "1", "--table", other, "--n-steps",
+            "512", "--gamma", "0.9", "--quiet")
+    assert r.returncode == 0, r.stderr
+    first, second = json.loads(other.read_text())["ppo"]
+    assert (first["settings"], second["settings"]) == ({}, {"n_steps": 512, "gamma": 0.9})
+    assert first["mean"] != second["mean"]  # 3 updates instead of none before the last episodes
+    assert second["command"].endswith("--ppo-lr 0.0003 --n-steps 512 --gamma 0.9")

@@ -382,11 +382,13 @@ def cmd_baselines(args) -> int:
         envs.describe(env_id, args.backend)
     if args.seeds < 1 or args.random_episodes < 1:
         raise ConfigError(f"--seeds and --random-episodes must be >= 1, got {args.seeds} and {args.random_episodes}")
-    lr = options.ppo_config(args).learning_rate
+    ppo = options.ppo_config(args)
+    lr = ppo.learning_rate
     progress, close = common.bars(args.quiet)
     try:
         found = baseline_runs.ensure(args.env, args.timesteps, args.seeds, lr, args.table, print, progress,
-                                     args.backend, args.env_workers, args.random_episodes, args.recompute)
+                                     args.backend, args.env_workers, args.random_episodes, args.recompute,
+                                     baselines.ppo_settings(ppo))
     finally:
         close()
     for env_id, b in found.items():

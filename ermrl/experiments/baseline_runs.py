@@ -16,13 +16,22 @@ def _command(argv: list[str]) -> str:
     return "ermrl " + " ".join(shlex.quote(a) for a in argv)
 
 
+def _flags(settings: dict) -> list[str]:
+    """The `ermrl baselines` flags of PPO settings (:func:`baselines.ppo_settings`), e.g. ['--gamma', '0.9']."""
+    return [a for k, v in settings.items() for a in (f"--{k.replace('_', '-')}", f"{v:g}" if isinstance(v, float)
+                                                     else str(v))]
+
+
 def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path: Path | None,
            log: Callable[[str], None], progress: Callable | None = None, backend: str = "auto",
-           env_workers="auto", random_episodes: int = 100, recompute: bool = False) -> dict[str, "bl.Baseline"]:
-    """Each env's Baseline at this budget; missing random or PPO entries are computed and saved first."""
+           env_workers="auto", random_episodes: int = 100, recompute: bool = False,
+           settings: dict | None = None) -> dict[str, "bl.Baseline"]:
+    """Each env's Baseline at this budget and PPO setting (``settings``: :func:`baselines.ppo_settings` of the
+    evolution's PPO, beside ``learning_rate``); missing random or PPO entries are computed and saved first."""
+    settings = settings or {}
     table_path = table_path or bl.default_table()
     table = bl.load_table(table_path)
-    if recompute or any(table.random(e) is None or table.ppo(e, timesteps, seeds, learning_rate) is None
+    if recompute or any(table.random(e) is None or table.ppo(e, timesteps, seeds, learning_rate, settings) is None
                         for e in env_ids):
         from ermrl.storage import check_file
 
@@ -35,18 +44,20 @@ def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path
             table.add_random(env_id, r, _command(["baselines", "--env", env_id, "--random-episodes",
                                                   str(random_episodes)]))
             changed = True
-        if recompute or table.ppo(env_id, timesteps, seeds, learning_rate) is None:
-            log(f"baselines: vanilla PPO on {env_id} ({seeds} seeds × {timesteps:,} steps, lr {learning_rate:g})")
+        if recompute or table.ppo(env_id, timesteps, seeds, learning_rate, settings) is None:
+            shown = "".join(f", {k} {v}" for k, v in settings.items())
+            log(f"baselines: vanilla PPO on {env_id} ({seeds} seeds × {timesteps:,} steps, lr {learning_rate:g}{shown})")
             fn = progress(f"PPO baseline {env_id}") if progress else None
-            p = bl.ppo_fitness(env_id, timesteps, seeds, learning_rate, backend, env_workers, fn)
+            p = bl.ppo_fitness(env_id, timesteps, seeds, learning_rate, backend, env_workers, fn, settings)
             table.add_ppo(env_id, p, _command(["baselines", "--env", env_id, "--timesteps", str(timesteps),
-                                               "--seeds", str(seeds), "--ppo-lr", f"{learning_rate:g}"]))
+                                               "--seeds", str(seeds), "--ppo-lr", f"{learning_rate:g}",
+                                               *_flags(settings)]))
             changed = True
         if changed:
             bl.save_table(table, table_path)
     out = {}
     for env_id in env_ids:
-        out[env_id] = bl.resolve(env_id, timesteps, seeds, learning_rate, table)
+        out[env_id] = bl.resolve(env_id, timesteps, seeds, learning_rate, table, settings)
     return out
 
 
@@ -82,7 +93,8 @@ def with_baselines(config, table_path: Path | None, storage_url: str, study_name
     except ConfigError:  # no such study yet
         pass
     found = ensure(config.env_ids, config.train.total_timesteps, config.seeds, config.train.ppo.learning_rate,
-                   table_path, log, progress, config.train.backend, config.train.env_workers)
+                   table_path, log, progress, config.train.backend, config.train.env_workers,
+                   settings=bl.ppo_settings(config.train.ppo))
     constants = tuple(found[e] for e in config.env_ids)
     if not allow_weak:
         check_informative(constants, config.normalization, advice)

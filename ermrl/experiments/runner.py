@@ -168,6 +168,8 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
     baselines ``table`` (a BaselineTable), a study over several envs not yet started (absent from ``done``) also
     pays for the vanilla PPO fitness its normalization needs where the table lacks it, once per env and budget
     (the random agent's 100 episodes are not counted: seconds)."""
+    from ermrl.experiments.baselines import ppo_settings
+
     done, left = done or {}, left or {}
     if unselected is None:
         unselected = {p.study for p in plans if done.get(p.study, 0) < p.config.trials}
@@ -178,10 +180,10 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
     for p in plans:
         c = p.config
         if table is not None and c.normalized and p.study not in done:
-            lr = c.train.ppo.learning_rate
+            lr, settings = c.train.ppo.learning_rate, ppo_settings(c.train.ppo)
             for env_id in c.env_ids:
-                key = (env_id, c.train.total_timesteps, c.seeds, lr)
-                if key not in normalizing and table.ppo(*key) is None:
+                key = (env_id, c.train.total_timesteps, c.seeds, lr, repr(settings))
+                if key not in normalizing and table.ppo(*key[:4], settings) is None:
                     normalizing.add(key)
                     rate = rates.setdefault(env_id, _rate(env_id, c.train.backend))
                     total += c.seeds * c.train.total_timesteps / rate
