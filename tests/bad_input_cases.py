@@ -50,6 +50,13 @@ CASES = [
     ("train --n-envs 4 --n-steps 1000 --batch-size 3000",
      "ermrl train: error: batch_size 3000 must divide n_steps × n_envs = 4000; pick a divisor of 4000"),
     ("train --n-epochs 0", "ermrl train: error: n_envs, n_steps, batch_size and n_epochs must all be >= 1"),
+    ("train --n-envs 0", "ermrl train: error: n_envs, n_steps, batch_size and n_epochs must all be >= 1"),
+    ("evolve --n-steps 2.5",
+     "ermrl evolve: error: argument --n-steps: invalid int value: '2.5'; see `ermrl evolve --help`"),
+    ("train --vf-coef -1", "ermrl train: error: vf_coef must be >= 0 and finite, got -1.0; SB3's default is 0.5"),
+    ("train --max-grad-norm 0",
+     "ermrl train: error: max_grad_norm must be positive and finite, got 0.0; SB3's default is 0.5"),
+    ("train --gamma x", "ermrl train: error: argument --gamma: invalid float value: 'x'; see `ermrl train --help`"),
     ("train --reservoirs 2 --sr 1 2 3", "ermrl train: error: --sr got 3 values for 2 reservoirs; give one value or 2"),
     ("train --model lstm --skip-connection",
      "ermrl train: error: --skip-connection feeds the observation beside a reservoir's context, but --model lstm has "

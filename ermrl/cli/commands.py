@@ -385,7 +385,7 @@ def cmd_baselines(args) -> int:
     ppo = options.ppo_config(args)
     lr = ppo.learning_rate
     progress, close = common.bars(args.quiet)
-    try:
+    try:  # vanilla PPO trains with every PPO setting given (--gamma, --preset, ...), as the evolution's agents
         found = baseline_runs.ensure(args.env, args.timesteps, args.seeds, lr, args.table, print, progress,
                                      args.backend, args.env_workers, args.random_episodes, args.recompute,
                                      baselines.ppo_settings(ppo))
