@@ -683,6 +683,43 @@ step_pendulum_rlzoo_ppo() {  # the Pendulum target, a diagnostic of its PPO sett
   "$E" analyze evaluate "$d"/{evolved-500u,default-phi-500u,evolved-100u,default-phi-100u,ppo,ppo-full-obs} \
       --episodes 50 --out "$d/evaluation.md"
 }
+step_pendulum_normalize() {  # the Pendulum target, a diagnostic of input normalization: rl-zoo's agent, where the
+  # target comes from, trains on normalized observations and rewards (VecNormalize, `normalize: True` in its
+  # hyperparams/ppo_lstm.yml); `--normalize` does the same to what ermrl's policy sees (the context) and to the
+  # rewards, the reservoirs still fed the raw values. The paper's PPO settings otherwise (lr 1e-4). Decided before any
+  # of it ran: the 8-seed near-default Φ* and the default Φ at 500 units first on the development seeds 1010-1019,
+  # paired with their runs without it (step pendulum_500u_more_seeds), then both on the test seeds once, whatever the
+  # first result, with PPO (masked and with the velocities) normalized too. ≈ 8 min a 500-unit model here
+  local d=docs/data/pendulum-normalize s=pendulum-500u-near-default-wide e=docs/data/deterministic-eval
+  local m=docs/data/pendulum-500u-near-default-wide/seeds-1010 phi
+  phi=$(phi_flags "docs/data/$s/studies.log" "$s")
+  local dev=(--env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 --normalize --seeds 10 --first-seed 1010
+             --timesteps 1000000 --no-save-agents --quiet)
+  # shellcheck disable=SC2086
+  [ -f "$d/dev/evolved/summary.json" ] || "$E" train "${dev[@]}" $phi --out "$d/dev/evolved"
+  [ -f "$d/dev/default/summary.json" ] || "$E" train "${dev[@]}" --sr 0.95 --lr 0.5 --iss 1.0 --out "$d/dev/default"
+  rm -f "$d"/dev/*/episodes.csv
+  .venv/bin/python benchmarks/variant_summary.py "evolved, normalized=$d/dev/evolved/summary.json" \
+      "evolved=$m/evolved/summary.json" "default Φ, normalized=$d/dev/default/summary.json" \
+      "default Φ=$m/default/summary.json" --compare "evolved, normalized" "evolved" \
+      --compare "default Φ, normalized" "default Φ" --title "500 units, seeds 1010-1019" \
+      --figure "$d/dev/pendulum.png" | tee "$d/dev/summary.md"
+  # shellcheck disable=SC2086
+  train_saved "$d/evolved-500u" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 --normalize $phi
+  train_saved "$d/default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 --iss 1.0 --ppo-lr 1e-4 \
+      --normalize
+  train_saved "$d/ppo" --env PendulumNoVel-v1 --no-reservoir --normalize
+  train_saved "$d/ppo-full-obs" --env Pendulum-v1 --no-reservoir --normalize
+  .venv/bin/python benchmarks/variant_summary.py "evolved, normalized=$d/evolved-500u/summary.json" \
+      "evolved=$e/pendulum-500u-near-default-wide/summary.json" \
+      "default Φ, normalized=$d/default-phi-500u/summary.json" "default Φ=$e/pendulum-default-phi-500u/summary.json" \
+      "masked, normalized=$d/ppo/summary.json" "masked=$e/pendulum-ppo/summary.json" \
+      "full obs, normalized=$d/ppo-full-obs/summary.json" \
+      --compare "evolved, normalized" "evolved" --compare "default Φ, normalized" "default Φ" \
+      --compare "masked, normalized" "masked" --compare "evolved, normalized" "default Φ, normalized" \
+      --title "500 units, test seeds 1000-1009" --figure "$d/pendulum.png" | tee "$d/summary.md"
+  "$E" analyze evaluate "$d"/{evolved-500u,default-phi-500u,ppo,ppo-full-obs} --episodes 50 --out "$d/evaluation.md"
+}
 train_saved() {  # train_saved OUT ARGS...: `ermrl train ARGS` on the test seeds, 10 × 1M, agents saved in OUT/agents/
   # (episodes.csv is left out of the repository: the curves and the per-seed scores are in curves.csv and summary.json)
   [ -f "$1/summary.json" ] || "$E" train --seeds 10 --first-seed 1000 --timesteps 1000000 "${@:2}" --quiet --out "$1"
@@ -712,7 +749,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo pendulum_normalize other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do

@@ -44,7 +44,8 @@ def write_agents(folder: Path | str, config, results, label: str = "") -> list[P
     """Writes every agent of ``results`` (a :class:`~ermrl.training.results.Results` with ``policies``) trained
     with ``config`` (a TrainConfig) to ``folder/seedS.npz``, one self-contained file per agent.
 
-    The file holds the final actor and critic parameters, the log std (Box) and a JSON record ``meta``: env id,
+    The file holds the final actor and critic parameters, the log std (Box), the context's normalization
+    statistics (``context_norm/mean`` and ``/var``, with ``PPOConfig.normalize``) and a JSON record ``meta``: env id,
     env layout, the TrainConfig, Φ (K values each), seed, learning rate, fitness and the ermrl version. The
     reservoirs are not stored: :func:`ermrl.load_agent` regenerates them from Φ and the seed. Returns the paths."""
     from ermrl import __version__
@@ -67,6 +68,8 @@ def write_agents(folder: Path | str, config, results, label: str = "") -> list[P
         arrays = {k: np.asarray(v[i], np.float32) for k, v in arrays.items()}
         if policies.log_std is not None:
             arrays["log_std"] = np.asarray(policies.log_std[i], np.float32)
+        if policies.context_norm is not None:
+            arrays.update({f"context_norm/{k}": np.asarray(v[i], np.float32) for k, v in policies.context_norm.items()})
         path = Path(folder) / f"{name}.npz"
         with atomic_path(path) as tmp, open(tmp, "wb") as f:
             np.savez(f, meta=np.array(json.dumps(meta, default=_json_default)), **arrays)
@@ -74,9 +77,10 @@ def write_agents(folder: Path | str, config, results, label: str = "") -> list[P
     return paths
 
 
-def read_agent(path: Path | str) -> tuple[dict, dict, dict, np.ndarray | None]:
-    """(meta, actor params, critic params, log_std) of a file written by :func:`write_agents`; the params are
-    nested dicts of float32 arrays as Flax has them. Raises a one-line ConfigError for a missing or damaged file."""
+def read_agent(path: Path | str) -> tuple[dict, dict, dict, np.ndarray | None, dict | None]:
+    """(meta, actor params, critic params, log_std, context_norm) of a file written by :func:`write_agents`; the
+    params are nested dicts of float32 arrays as Flax has them, ``context_norm`` {"mean", "var"} (context_dim,)
+    or None. Raises a one-line ConfigError for a missing or damaged file."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"agent file {path} does not exist; give a .npz file from a run folder's agents/ "
@@ -94,7 +98,8 @@ def read_agent(path: Path | str) -> tuple[dict, dict, dict, np.ndarray | None]:
     if meta.get("version", 0) > AGENT_VERSION:
         raise ConfigError(f"{path} was written by ermrl {meta.get('ermrl_version')} (agent format "
                           f"{meta['version']}); upgrade ermrl to load it")
-    return meta, unflatten(flat, "actor"), unflatten(flat, "critic"), flat.get("log_std")
+    return (meta, unflatten(flat, "actor"), unflatten(flat, "critic"), flat.get("log_std"),
+            unflatten(flat, "context_norm") or None)
 
 
 def find_agents(folder: Path | str) -> list[Path]:

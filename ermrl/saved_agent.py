@@ -30,6 +30,7 @@ from ermrl import agent_files, storage
 from ermrl.agent import Agent, AgentConfig, Phi
 from ermrl.envs.spaces import EnvInfo
 from ermrl.errors import ConfigError
+from ermrl.ppo.normalize import CLIP_OBS as NORM_CLIP, EPSILON as NORM_EPSILON
 
 
 class DeleteDims(gym.ObservationWrapper):
@@ -80,7 +81,7 @@ class SavedAgent:
     for PPO-LSTM); ``head`` (action_dim,), the policy's logits (Discrete) or Gaussian means (Box)."""
 
     def __init__(self, path: Path, meta: dict, actor: dict, critic: dict, log_std: np.ndarray | None,
-                 sampling_seed: int = 0):
+                 sampling_seed: int = 0, context_norm: dict | None = None):
         self.path = Path(path)
         self.meta = meta
         model = (meta.get("train", {}).get("ppo") or {}).get("model", "ff")
@@ -104,6 +105,11 @@ class SavedAgent:
         self.seed: int = int(meta["seed"])
         self.learning_rate: float = float(meta["learning_rate"])
         self.log_std = None if log_std is None else np.asarray(log_std, np.float32)
+        self.context_norm = context_norm  # {"mean", "var"}: frozen statistics of a normalized agent, else None
+        if bool((meta.get("train", {}).get("ppo") or {}).get("normalize")) != (context_norm is not None):
+            raise ConfigError(f"{path} is not a complete ermrl agent file (normalization statistics "
+                              f"{'missing' if context_norm is None else 'without normalize'}); retrain, or load "
+                              "another agent")
         self.agent = Agent(self.config, self.env)
         self.context_dim = self.agent.context_dim if not self.recurrent else self._lstm_pi["kernel_h"].shape[0]
         action = self.env.action
@@ -152,6 +158,10 @@ class SavedAgent:
         else:
             action_enc, r = self._encode(self._previous), float(reward)
         self.context = self._observe(obs, action_enc, r)
+        if self.context_norm is not None:  # as in training, with the statistics frozen (VecNormalize.training=False)
+            mean, var = self.context_norm["mean"], self.context_norm["var"]
+            self.context = np.clip((self.context - mean) / np.sqrt(var + NORM_EPSILON), -NORM_CLIP, NORM_CLIP
+                                   ).astype(np.float32)
         self._critic_in = self.context if not self.recurrent else self._state[1][0]
         self.head = _mlp(self._actor, self.context)
         self._previous = action = self._choose(self.head, deterministic)
@@ -255,5 +265,5 @@ def load_agent(path: Path | str, sampling_seed: int = 0) -> SavedAgent:
             raise ConfigError(f"{path} has no saved agents (agents/*.npz); `ermrl train` and `ermrl test` save "
                               "them unless --no-save-agents")
         path = found[0]
-    meta, actor, critic, log_std = agent_files.read_agent(path)
-    return SavedAgent(path, meta, actor, critic, log_std, sampling_seed)
+    meta, actor, critic, log_std, context_norm = agent_files.read_agent(path)
+    return SavedAgent(path, meta, actor, critic, log_std, sampling_seed, context_norm)

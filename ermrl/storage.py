@@ -77,9 +77,27 @@ def _float_or_none(v) -> float | None:
 # -- typed config codec ----------------------------------------------------------------------------------
 
 
+OMIT_WHEN_DEFAULT = "ermrl_omit_when_default"
+"""Field metadata key: a config field marked with it is left out of :func:`to_dict` while it has its default.
+For fields added after results were recorded: a config that does not use one keeps the record, and so the
+identity (study resumption, snapshots, stored baselines), it had before the field existed."""
+
+
 def to_dict(config) -> dict:
-    """A JSON-ready dict of a (nested) frozen dataclass config."""
-    return json.loads(json.dumps(dataclasses.asdict(config), default=_json_default))
+    """A JSON-ready dict of a (nested) frozen dataclass config, less the fields marked
+    :data:`OMIT_WHEN_DEFAULT` that have their default value."""
+    return json.loads(json.dumps(_fields(config), default=_json_default))
+
+
+def _fields(obj):
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: _fields(getattr(obj, f.name)) for f in dataclasses.fields(obj)
+                if not (f.metadata.get(OMIT_WHEN_DEFAULT) and getattr(obj, f.name) == f.default)}
+    if isinstance(obj, (list, tuple)):
+        return [_fields(v) for v in obj]
+    if isinstance(obj, dict):
+        return {k: _fields(v) for k, v in obj.items()}
+    return obj
 
 
 def from_dict(cls, data: dict, where: str = ""):

@@ -56,6 +56,8 @@ CASES = [
     ("train --vf-coef -1", "ermrl train: error: vf_coef must be >= 0 and finite, got -1.0; SB3's default is 0.5"),
     ("train --max-grad-norm 0",
      "ermrl train: error: max_grad_norm must be positive and finite, got 0.0; SB3's default is 0.5"),
+    ("train --model lstm --normalize",
+     "ermrl train: error: normalize is not available with model 'lstm' yet; train PPO-LSTM without --normalize"),
     ("train --gamma x", "ermrl train: error: argument --gamma: invalid float value: 'x'; see `ermrl train --help`"),
     ("train --reservoirs 2 --sr 1 2 3", "ermrl train: error: --sr got 3 values for 2 reservoirs; give one value or 2"),
     ("train --model lstm --skip-connection",
@@ -94,7 +96,7 @@ CASES = [
      "ermrl train: error: config file evolvekey.toml: unknown option 'trials' for `ermrl train`; options here: "
      "backend, batch-size, bias, bias-scaling, clip-range, ent-coef, env, env-workers, feed-action, first-seed, "
      "gae-lambda, gamma, input-connectivity, iss, lr, lstm-hidden, lstm-seq-len, max-grad-norm, model, n-envs, "
-     "n-epochs, n-steps, no-reservoir, observed-units, out, ppo-lr, preset, quiet, rc-connectivity, reservoirs, "
+     "n-epochs, n-steps, no-reservoir, normalize, observed-units, out, ppo-lr, preset, quiet, rc-connectivity, reservoirs, "
      "save-agents, seeds, skip-connection, snapshot-every, sr, tensorboard, timesteps, units, vf-coef"),
     ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "
                                 "integer"),

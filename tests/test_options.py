@@ -7,6 +7,7 @@ import re
 import numpy as np
 import pytest
 
+from ermrl import load_agent
 from ermrl.agent import AgentConfig
 from ermrl.cli import build_parser, parse
 from ermrl.cli import options
@@ -35,7 +36,7 @@ def test_every_training_command_takes_every_agent_option_from_one_definition():
                          "feed_action": AgentConfig.feed_action, "skip_connection": False,
                          "observed_units": AgentConfig.observed_units, "preset": "sb3", "ppo_lr": None,
                          "timesteps": TrainConfig.total_timesteps, "backend": TrainConfig.backend,
-                         "env_workers": TrainConfig.env_workers,
+                         "env_workers": TrainConfig.env_workers, "normalize": None,
                          **dict.fromkeys(PPO_FIELDS)}  # None: the preset's value
     assert set(expected_defaults) == set(AGENT_DESTS)
     for dest in AGENT_DESTS:
@@ -90,27 +91,27 @@ def test_ppo_hyperparameters_override_the_preset_and_reach_the_training(tmp_path
     """--gamma, --n-envs, ... (rl-baselines3-zoo's tuned settings are given this way) replace the preset's values one
     by one, in every training command; the run trains with them: SB3's stopping rule counts n_envs × n_steps."""
     zoo = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "16", "--gamma", "0.9", "--gae-lambda", "0.8",
-           "--n-epochs", "3", "--clip-range", "0.1", "--ent-coef", "0.01", "--vf-coef", "0.25", "--max-grad-norm", "1"]
+           "--n-epochs", "3", "--clip-range", "0.1", "--ent-coef", "0.01", "--vf-coef", "0.25", "--max-grad-norm", "1",
+           "--normalize"]
     expected = {"n_envs": 2, "n_steps": 32, "batch_size": 16, "gamma": 0.9, "gae_lambda": 0.8, "n_epochs": 3,
-                "clip_range": 0.1, "ent_coef": 0.01, "vf_coef": 0.25, "max_grad_norm": 1.0}
+                "clip_range": 0.1, "ent_coef": 0.01, "vf_coef": 0.25, "max_grad_norm": 1.0, "normalize": True}
     for command in ("train", "evolve", "baselines --env CartPole-v1"):
         ppo = options.ppo_config(parse([*command.split(), *zoo, "--preset", "fast", "--ppo-lr", "1e-3"]))
         assert {k: getattr(ppo, k) for k in expected} == expected and ppo.learning_rate == 1e-3, command
     fast = options.ppo_config(parse(["evolve", "--preset", "fast", "--gamma", "0.9"]))  # the rest stays the preset's
-    assert (fast.n_envs, fast.n_steps, fast.n_epochs, fast.gamma) == (8, 256, 4, 0.9)
+    assert (fast.n_envs, fast.n_steps, fast.n_epochs, fast.gamma, fast.normalize) == (8, 256, 4, 0.9, False)
     out = tmp_path / "run"
     r = ermrl("train", "--no-reservoir", "--seeds", "1", "--timesteps", "200", *zoo, "--out", str(out), "--quiet")
     assert r.returncode == 0, r.stderr
     config = json.loads((out / "config.json").read_text())["train"]["ppo"]
     assert {k: config[k] for k in expected} == expected
     assert json.loads((out / "summary.json").read_text())["total_timesteps"] == 256  # 4 rollouts of 2 × 32 steps
+    assert load_agent(out).context_norm["mean"].shape == (2,)  # plain PPO on CartPoleNoVel: its 2 observed dims
 
 
 def test_reservoirpy_hyperparameters_reach_the_reservoirs_drawn(tmp_path):
     """--rc-connectivity, --input-connectivity and --bias-scaling (C17's sweep) are stored in the run's config, and
     the reservoir of a saved agent, drawn again from it, has that many non-zero weights and that bias."""
-    from ermrl import load_agent
-
     out = tmp_path / "run"
     r = ermrl("train", "--seeds", "1", "--timesteps", "2048", "--rc-connectivity", "0.5", "--input-connectivity", "1",
               "--bias-scaling", "0.25", "--out", str(out), "--quiet")

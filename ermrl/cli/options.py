@@ -123,7 +123,9 @@ def _groups() -> dict[str, list[Option]]:
                        kwargs={"type": float, "default": None}),
                 *(Option(f"--{name.replace('_', '-')}", PPOConfig, name,
                          help=f"Default: the preset's ({getattr(PPOConfig(), name)} in sb3).",
-                         kwargs={"type": kind, "default": None}) for name, kind in PPO_FIELDS.items())],
+                         kwargs={"type": kind, "default": None}) for name, kind in PPO_FIELDS.items()),
+                Option("--normalize", PPOConfig, "normalize", help="Default: off (SB3's PPO, the paper).",
+                       kwargs={"action": argparse.BooleanOptionalAction, "default": None})],
         "search": [Option("--trials", EvolveConfig, "trials", kwargs={"type": int}),
                    Option("--sampler", help="cmaes (Optuna's CmaEsSampler, the paper), random or tpe.",
                           default="cmaes"),
@@ -169,8 +171,8 @@ PPO_FIELDS = {"n_envs": int, "n_steps": int, "batch_size": int, "n_epochs": int,
 each overrides the preset's value, as ``--ppo-lr`` does (e.g. rl-baselines3-zoo's tuned settings for an env)."""
 
 AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connectivity", "bias_scaling", "feed_action",
-               "skip_connection", "observed_units", "preset", "ppo_lr", *PPO_FIELDS, "timesteps", "backend",
-               "env_workers")
+               "skip_connection", "observed_units", "preset", "ppo_lr", *PPO_FIELDS, "normalize", "timesteps",
+               "backend", "env_workers")
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
 
@@ -211,6 +213,8 @@ def ppo_config(args):
     changes = {name: getattr(args, name) for name in PPO_FIELDS if getattr(args, name, None) is not None}
     if args.ppo_lr is not None:
         changes["learning_rate"] = args.ppo_lr
+    if getattr(args, "normalize", None) is not None:
+        changes["normalize"] = args.normalize
     return dataclasses.replace(ppo, **changes) if changes else ppo
 
 

@@ -94,6 +94,8 @@ def save_job(folder: Path, name: str, identity: dict, results: Results) -> Path:
         arrays.update(agent_files.flatten(results.policies.critic, "critic"))
         if results.policies.log_std is not None:
             arrays["log_std"] = results.policies.log_std
+        if results.policies.context_norm is not None:
+            arrays.update(agent_files.flatten(results.policies.context_norm, "context_norm"))
     path = Path(folder) / f"{name}.npz"
     with storage.atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.savez(f, meta=np.array(json.dumps(meta)), **{k: np.asarray(v) for k, v in arrays.items()})
@@ -145,7 +147,8 @@ def _results(meta: dict, flat: dict[str, np.ndarray]) -> Results:
     if meta["env"] is not None:
         env = storage.from_dict(EnvInfo, meta["env"], "env")
         policies = Policies(env, agent_files.unflatten(flat, "actor"), agent_files.unflatten(flat, "critic"),
-                            flat["log_std"] if meta["log_std"] else None)
+                            flat["log_std"] if meta["log_std"] else None,
+                            agent_files.unflatten(flat, "context_norm") or None)
     return Results(env_id=meta["env_id"], total_timesteps=meta["total_timesteps"],
                    timesteps_per_iteration=meta["timesteps_per_iteration"], seeds=flat["seeds"],
                    phi={k: flat[f"phi/{k}"] for k in meta["phi"]}, learning_rate=flat["learning_rate"],

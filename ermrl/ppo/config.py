@@ -6,6 +6,7 @@ import dataclasses
 from typing import Literal
 
 from ermrl.errors import ConfigError
+from ermrl.storage import OMIT_WHEN_DEFAULT
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +44,10 @@ class PPOConfig:
     """Hidden widths of the separate actor and critic tanh MLPs (SB3 MlpPolicy)."""
     log_std_init: float = 0.0
     """Initial state-independent log std of the Gaussian policy (Box actions)."""
+    normalize: bool = dataclasses.field(default=False, metadata={OMIT_WHEN_DEFAULT: True})
+    """Normalize what the policy sees (the context) and the rewards with running statistics, as SB3's
+    ``VecNormalize`` (rl-baselines3-zoo's ``normalize: True``; :mod:`ermrl.ppo.normalize`). Off in SB3's
+    PPO and in the paper. Left out of a config's record while off, so that older studies and stores match."""
     model: Literal["ff", "lstm"] = "ff"
     """Policy model: "ff", SB3's MlpPolicy on the context (what ER-MRL and plain PPO use); "lstm", the recurrent
     baseline, sb3-contrib RecurrentPPO's MlpLstmPolicy (separate actor and critic LSTMs on the raw observation,
@@ -84,6 +89,9 @@ class PPOConfig:
         if self.model not in ("ff", "lstm"):
             raise ConfigError(f"model must be 'ff' or 'lstm', got {self.model!r}")
         if self.model == "lstm":
+            if self.normalize:
+                raise ConfigError("normalize is not available with model 'lstm' yet; train PPO-LSTM without "
+                                  "--normalize")
             if min(self.lstm_hidden_size, self.lstm_seq_len) < 1:
                 raise ConfigError("lstm_hidden_size and lstm_seq_len must be >= 1")
             if self.batch_size % self.lstm_seq_len:

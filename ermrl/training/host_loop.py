@@ -73,7 +73,7 @@ class HostIteration:
         def advance_packed(res, carry, chosen, packed):
             out = Stepped.unpack(packed, d)
             tr = Transition(out.obs, carry.env_state, out.reward, out.terminated, out.truncated, out.final_obs)
-            return advance(agent, res, carry, chosen, tr)
+            return advance(agent, res, carry, chosen, tr, ppo.gamma)
 
         def advance_choose(params, res, carry, chosen, packed, noise):
             carry, step = advance_packed(res, carry, chosen, packed)

@@ -40,9 +40,9 @@ def make_agent_fns(config: TrainConfig) -> AgentFns:
         res = Agent.build(unit_weights, phi)
         learner = ppo_update.init_learner(net, ppo, k_policy, agent.context_dim, learning_rate)
         if first_obs is None:
-            carry = start(env, agent, res, k_env, ppo.n_envs)
+            carry = start(env, agent, res, k_env, ppo.n_envs, ppo.normalize)
         else:  # host envs: the env state lives on the host
-            carry = start_from_obs(agent, res, first_obs, jnp.zeros((ppo.n_envs,), jnp.int32))
+            carry = start_from_obs(agent, res, first_obs, jnp.zeros((ppo.n_envs,), jnp.int32), ppo.normalize)
         return AgentState(learner, res, carry, k_next)
 
     def learn(state: AgentState, carry: EnvCarry, steps: Step, k_update) -> tuple[AgentState, IterationLog]:
@@ -61,7 +61,7 @@ def make_agent_fns(config: TrainConfig) -> AgentFns:
     def iteration(state: AgentState) -> tuple[AgentState, IterationLog]:
         key, k_roll, k_update = jax.random.split(state.key, 3)
         carry, steps = collect(env, agent, net, state.learner.params, state.reservoirs, state.envs, k_roll,
-                               ppo.n_steps)
+                               ppo.n_steps, ppo.gamma)
         return learn(state._replace(key=key), carry, steps, k_update)
 
     return AgentFns(env, agent, net, init, iteration, learn)

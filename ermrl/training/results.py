@@ -48,18 +48,24 @@ class Policies:
     """The same for the critic (its last layer has one output, the value)."""
     log_std: np.ndarray | None
     """(A, action_dim) state-independent log std for Box actions; None for Discrete."""
+    context_norm: dict | None = None
+    """With ``PPOConfig.normalize``: {"mean": (A, context_dim), "var": (A, context_dim)}, the final running
+    statistics the policy's input is standardized with (:func:`ermrl.ppo.normalize.normalize`); else None."""
 
     @staticmethod
-    def from_params(env: EnvInfo, params, n: int) -> "Policies":
-        """From a :class:`~ermrl.ppo.networks.PolicyParams` of NumPy arrays (padded agents first dropped)."""
+    def from_params(env: EnvInfo, params, n: int, norm=None) -> "Policies":
+        """From a :class:`~ermrl.ppo.networks.PolicyParams` of NumPy arrays (padded agents first dropped) and the
+        agents' :class:`~ermrl.ppo.normalize.Normalizer` (None without normalization)."""
         take = lambda x: np.asarray(x)[:n]
         return Policies(env, _map(take, params.actor), _map(take, params.critic),
-                        None if params.log_std is None else take(params.log_std))
+                        None if params.log_std is None else take(params.log_std),
+                        None if norm is None else {"mean": take(norm.context.mean), "var": take(norm.context.var)})
 
     def select(self, idx) -> "Policies":
         take = lambda x: x[np.asarray(idx)]
         return Policies(self.env, _map(take, self.actor), _map(take, self.critic),
-                        None if self.log_std is None else take(self.log_std))
+                        None if self.log_std is None else take(self.log_std),
+                        None if self.context_norm is None else _map(take, self.context_norm))
 
 
 def _map(fn, tree):
@@ -178,7 +184,8 @@ class Results:
             ps = [p.policies for p in parts]
             policies = Policies(first.policies.env, _zip_map(cat, [q.actor for q in ps]),
                                 _zip_map(cat, [q.critic for q in ps]),
-                                None if ps[0].log_std is None else cat(*(q.log_std for q in ps)))
+                                None if ps[0].log_std is None else cat(*(q.log_std for q in ps)),
+                                None if ps[0].context_norm is None else _zip_map(cat, [q.context_norm for q in ps]))
         return dataclasses.replace(
             first, seeds=cat(*(p.seeds for p in parts)), phi={k: cat(*(p.phi[k] for p in parts)) for k in first.phi},
             learning_rate=cat(*(p.learning_rate for p in parts)), episodes=[e for p in parts for e in p.episodes],

@@ -4,7 +4,9 @@ Semantics follow stable-baselines3's ``collect_rollouts`` with the reference's r
 - Box actions are sampled unclipped, clipped to the bounds for the env, and stored unclipped for the loss;
 - on a time-limit truncation the reward gets ``γ·V(c_final)``, the value of the context built from the
   episode's final observation (SB3's ``TimeLimit.truncated`` bootstrap);
-- at an episode's end the reservoir state is reset and fed (o_0, zeros, 0).
+- at an episode's end the reservoir state is reset and fed (o_0, zeros, 0);
+- with ``PPOConfig.normalize`` the contexts and rewards PPO sees are normalized as SB3's ``VecNormalize`` does
+  (:mod:`ermrl.ppo.normalize`); the reservoirs and the episode returns see the raw values.
 """
 
 from __future__ import annotations
@@ -16,11 +18,12 @@ import jax.numpy as jnp
 
 from ermrl.agent import Agent, Reservoirs
 from ermrl.envs.jax_backend import JaxEnv, Transition
+from ermrl.ppo import normalize
 from ermrl.ppo.networks import ActorCritic, PolicyParams
 
 
 class EnvCarry(NamedTuple):
-    """Per-env state carried between steps; every field has a leading (n_envs,) axis."""
+    """Per-env state carried between steps; every field but ``norm`` has a leading (n_envs,) axis."""
 
     env_state: Any
     res_state: jax.Array | None
@@ -31,6 +34,8 @@ class EnvCarry(NamedTuple):
     """(n_envs,) undiscounted return of the running episode."""
     episode_length: jax.Array
     """(n_envs,) int32 steps of the running episode."""
+    norm: normalize.Normalizer | None = None
+    """The agent's running statistics with ``PPOConfig.normalize`` (``context`` is then normalized); else None."""
 
 
 class Step(NamedTuple):
@@ -41,12 +46,14 @@ class Step(NamedTuple):
     log_prob: jax.Array
     value: jax.Array
     reward: jax.Array
+    """The reward PPO learns from (normalized with ``PPOConfig.normalize``)."""
     done: jax.Array
     truncated: jax.Array
     final_context: jax.Array
-    """Context built from the step's final observation (before any reset), for the truncation bootstrap."""
+    """Context built from the step's final observation (before any reset), for the truncation bootstrap
+    (normalized with ``PPOConfig.normalize``)."""
     finished_return: jax.Array
-    """Return of the episode this step ended, NaN when it ended none."""
+    """Return (of raw rewards) of the episode this step ended, NaN when it ended none."""
     finished_length: jax.Array
     """Length of the episode this step ended, 0 when it ended none."""
 
@@ -62,18 +69,22 @@ class Act(NamedTuple):
     value: jax.Array
 
 
-def start(env: JaxEnv, agent: Agent, res: Reservoirs, key: jax.Array, n_envs: int) -> EnvCarry:
+def start(env: JaxEnv, agent: Agent, res: Reservoirs, key: jax.Array, n_envs: int, normalized: bool) -> EnvCarry:
     """Resets n_envs envs and their reservoirs."""
     obs, env_state = jax.vmap(env.reset)(jax.random.split(key, n_envs))
-    return start_from_obs(agent, res, obs, env_state)
+    return start_from_obs(agent, res, obs, env_state, normalized)
 
 
-def start_from_obs(agent: Agent, res: Reservoirs, obs: jax.Array, env_state: Any) -> EnvCarry:
-    """The carry for envs just reset to ``obs`` (n_envs, obs_dim): reservoirs reset and fed (o_0, zeros, 0)."""
+def start_from_obs(agent: Agent, res: Reservoirs, obs: jax.Array, env_state: Any, normalized: bool) -> EnvCarry:
+    """The carry for envs just reset to ``obs`` (n_envs, obs_dim): reservoirs reset and fed (o_0, zeros, 0);
+    ``normalized``: start the normalization statistics from these first contexts."""
     n_envs = obs.shape[0]
     res_state, context = jax.vmap(agent.start_episode, in_axes=(None, 0))(res, obs)
+    norm = None
+    if normalized:
+        norm, context = normalize.start(context)
     zeros = jnp.zeros((n_envs,), jnp.float32)
-    return EnvCarry(env_state, res_state, context, zeros, jnp.zeros((n_envs,), jnp.int32))
+    return EnvCarry(env_state, res_state, context, zeros, jnp.zeros((n_envs,), jnp.int32), norm)
 
 
 def act(net: ActorCritic, params: PolicyParams, context: jax.Array, noise: jax.Array) -> Act:
@@ -88,8 +99,10 @@ def act(net: ActorCritic, params: PolicyParams, context: jax.Array, noise: jax.A
     return Act(action, env_action, net.log_prob(params, head, action), net.value(params, context))
 
 
-def advance(agent: Agent, res: Reservoirs, carry: EnvCarry, chosen: Act, tr: Transition) -> tuple[EnvCarry, Step]:
-    """Feeds one env step's outcome to the reservoirs and episode bookkeeping; every field (n_envs, ...)."""
+def advance(agent: Agent, res: Reservoirs, carry: EnvCarry, chosen: Act, tr: Transition,
+            gamma: float) -> tuple[EnvCarry, Step]:
+    """Feeds one env step's outcome to the reservoirs and episode bookkeeping; every field (n_envs, ...).
+    ``gamma`` discounts the running return that normalizes rewards (unused without ``carry.norm``)."""
     action_enc = jax.vmap(agent.encode_action)(chosen.env_action)
     observe = jax.vmap(agent.observe, in_axes=(None, 0, 0, 0, 0))
     res_final, final_context = observe(res, carry.res_state, tr.final_obs, action_enc, tr.reward)
@@ -99,25 +112,29 @@ def advance(agent: Agent, res: Reservoirs, carry: EnvCarry, chosen: Act, tr: Tra
     pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(done.reshape((-1,) + (1,) * (x.ndim - 1)), x, y), a, b)
     episode_return = carry.episode_return + tr.reward
     episode_length = carry.episode_length + 1
+    context, reward, norm = pick(start_context, final_context), tr.reward, carry.norm
+    if norm is not None:
+        norm, context, final_context, reward = normalize.step(norm, context, final_context, reward, done, gamma)
     step = Step(
         context=carry.context, action=chosen.action, log_prob=chosen.log_prob, value=chosen.value,
-        reward=tr.reward, done=done, truncated=tr.truncated, final_context=final_context,
+        reward=reward, done=done, truncated=tr.truncated, final_context=final_context,
         finished_return=jnp.where(done, episode_return, jnp.nan),
         finished_length=jnp.where(done, episode_length, 0),
     )
     carry = EnvCarry(
         env_state=tr.state,
         res_state=pick(res_start, res_final),
-        context=pick(start_context, final_context),
+        context=context,
         episode_return=jnp.where(done, 0.0, episode_return),
         episode_length=jnp.where(done, 0, episode_length),
+        norm=norm,
     )
     return carry, step
 
 
 def collect(
     env: JaxEnv, agent: Agent, net: ActorCritic, params: PolicyParams, res: Reservoirs, carry: EnvCarry,
-    key: jax.Array, n_steps: int,
+    key: jax.Array, n_steps: int, gamma: float,
 ) -> tuple[EnvCarry, Step]:
     """Runs n_steps steps in each env. Returns the final carry and the stacked steps (n_steps, n_envs, ...)."""
     n_envs = carry.context.shape[0]
@@ -133,6 +150,6 @@ def collect(
         noise, key_step, restart = drawn
         chosen = act(net, params, carry.context, noise)
         tr = jax.vmap(env.step_from)(key_step, carry.env_state, chosen.env_action, restart)
-        return advance(agent, res, carry, chosen, tr)
+        return advance(agent, res, carry, chosen, tr, gamma)
 
     return jax.lax.scan(body, carry, (noise, key_step, restart))

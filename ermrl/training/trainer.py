@@ -187,7 +187,9 @@ class Trainer:
             finished, metrics, finite, state, train_s = self._loop(compiled, state, n, compile_s, progress_fn,
                                                                         resumed, saver)
             # the final policies, in one transfer after the loop (the first n agents; padding dropped)
-            policies = Policies.from_params(self.env.info, jax.device_get(state.learner.params), n)
+            norm = getattr(state.envs, "norm", None)  # PPO-LSTM's carry has none
+            params, norm = jax.device_get((state.learner.params, norm))
+            policies = Policies.from_params(self.env.info, params, n, norm)
         finally:
             self.close()
         return Results.from_iterations(
