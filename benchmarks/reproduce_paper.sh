@@ -720,6 +720,45 @@ step_pendulum_normalize() {  # the Pendulum target, a diagnostic of input normal
       --title "500 units, test seeds 1000-1009" --figure "$d/pendulum.png" | tee "$d/summary.md"
   "$E" analyze evaluate "$d"/{evolved-500u,default-phi-500u,ppo,ppo-full-obs} --episodes 50 --out "$d/evaluation.md"
 }
+step_pendulum_rlzoo_sde() {  # the Pendulum target, rl-zoo's PendulumNoVel recipe as far as ermrl can follow it:
+  # its scalar settings (step pendulum_rlzoo_ppo), input normalization (--normalize) and gSDE with a new exploration
+  # matrix every 4 steps (--use-sde --sde-sample-freq 4); not its policy (ReLU, no orthogonal init, 64-unit layers, an
+  # LSTM). First PPO with rl-zoo's Pendulum-v1 PPO settings at rl-zoo's 100k steps, to check gSDE against rl-zoo's
+  # benchmark (-172.2 ± 104.2); then the 8-seed near-default Φ* at 500 units on the development seeds 1010-1019 and on
+  # the test seeds (both decided before either ran), the default Φ and PPO (masked, full obs) on the test seeds, 1M
+  # steps each. ≈ 10 min a 500-unit model here
+  local d=docs/data/pendulum-rlzoo-sde s=pendulum-500u-near-default-wide e=docs/data/deterministic-eval phi
+  local p=docs/data/pendulum-rlzoo-ppo m=docs/data/pendulum-500u-near-default-wide/seeds-1010
+  phi=$(phi_flags "docs/data/$s/studies.log" "$s")
+  local zoo=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2
+             --ent-coef 0.0 --use-sde --sde-sample-freq 4)
+  [ -f "$d/ppo-pendulum-100k/summary.json" ] || "$E" train --env Pendulum-v1 --no-reservoir --seeds 10 \
+      --first-seed 1000 --timesteps 100000 "${zoo[@]}" --quiet --out "$d/ppo-pendulum-100k"
+  rm -f "$d/ppo-pendulum-100k/episodes.csv"
+  "$E" analyze evaluate "$d/ppo-pendulum-100k" --episodes 50 --out "$d/ppo-pendulum-100k/evaluation.md"
+  # shellcheck disable=SC2086
+  [ -f "$d/dev/evolved/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 "${zoo[@]}" --normalize $phi \
+      --seeds 10 --first-seed 1010 --timesteps 1000000 --no-save-agents --quiet --out "$d/dev/evolved"
+  rm -f "$d/dev/evolved/episodes.csv"
+  # shellcheck disable=SC2086
+  train_saved "$d/evolved-500u" --env PendulumNoVel-v1 --units 500 "${zoo[@]}" --normalize $phi
+  train_saved "$d/default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 --iss 1.0 "${zoo[@]}" \
+      --normalize
+  train_saved "$d/ppo" --env PendulumNoVel-v1 --no-reservoir "${zoo[@]}" --normalize
+  train_saved "$d/ppo-full-obs" --env Pendulum-v1 --no-reservoir "${zoo[@]}" --normalize
+  .venv/bin/python benchmarks/variant_summary.py "evolved, zoo + gSDE=$d/dev/evolved/summary.json" \
+      "evolved, paper=$m/evolved/summary.json" --compare "evolved, zoo + gSDE" "evolved, paper" \
+      --title "500 units, seeds 1010-1019" | tee "$d/dev-summary.md"
+  .venv/bin/python benchmarks/variant_summary.py "evolved, zoo + gSDE=$d/evolved-500u/summary.json" \
+      "evolved, paper=$e/pendulum-500u-near-default-wide/summary.json" "evolved, zoo=$p/evolved-500u/summary.json" \
+      "default Φ, zoo + gSDE=$d/default-phi-500u/summary.json" "default Φ, paper=$e/pendulum-default-phi-500u/summary.json" \
+      "masked, zoo + gSDE=$d/ppo/summary.json" "full obs, zoo + gSDE=$d/ppo-full-obs/summary.json" \
+      --compare "evolved, zoo + gSDE" "evolved, paper" --compare "evolved, zoo + gSDE" "evolved, zoo" \
+      --compare "default Φ, zoo + gSDE" "default Φ, paper" \
+      --title "rl-zoo's settings with normalization and gSDE, 500 units, test seeds" --figure "$d/pendulum.png" \
+      | tee "$d/summary.md"
+  "$E" analyze evaluate "$d"/{evolved-500u,default-phi-500u,ppo,ppo-full-obs} --episodes 50 --out "$d/evaluation.md"
+}
 train_saved() {  # train_saved OUT ARGS...: `ermrl train ARGS` on the test seeds, 10 × 1M, agents saved in OUT/agents/
   # (episodes.csv is left out of the repository: the curves and the per-seed scores are in curves.csv and summary.json)
   [ -f "$1/summary.json" ] || "$E" train --seeds 10 --first-seed 1000 --timesteps 1000000 "${@:2}" --quiet --out "$1"
@@ -749,7 +788,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo pendulum_normalize other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo pendulum_normalize pendulum_rlzoo_sde other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do

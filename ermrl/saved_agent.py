@@ -46,12 +46,13 @@ class DeleteDims(gym.ObservationWrapper):
         return observation[self.kept]
 
 
-def _mlp(layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
-    """The tanh MLP of :class:`ermrl.ppo.networks.MLP`: (in,) -> (out,), the last layer linear."""
+def _mlp(layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray, features: bool = False):
+    """The tanh MLP of :class:`ermrl.ppo.networks.MLP`: (in,) -> (out,), the last layer linear; with
+    ``features``, (out, the last hidden layer)."""
     for kernel, bias in layers[:-1]:
         x = np.tanh(x @ kernel + bias)
     kernel, bias = layers[-1]
-    return x @ kernel + bias
+    return (x @ kernel + bias, x) if features else x @ kernel + bias
 
 
 def _layers(params: dict) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -105,6 +106,7 @@ class SavedAgent:
         self.seed: int = int(meta["seed"])
         self.learning_rate: float = float(meta["learning_rate"])
         self.log_std = None if log_std is None else np.asarray(log_std, np.float32)
+        self.sde = self.log_std is not None and self.log_std.ndim == 2  # gSDE (PPOConfig.use_sde)
         self.context_norm = context_norm  # {"mean", "var"}: frozen statistics of a normalized agent, else None
         if bool((meta.get("train", {}).get("ppo") or {}).get("normalize")) != (context_norm is not None):
             raise ConfigError(f"{path} is not a complete ermrl agent file (normalization statistics "
@@ -137,6 +139,9 @@ class SavedAgent:
         self._previous = None
         self.context: np.ndarray | None = None
         self.head: np.ndarray | None = None
+        self._latent: np.ndarray | None = None
+        if self.sde:  # one exploration matrix (latent_dim, action_dim) per episode, N(0, exp(log_std)²)
+            self._exploration = np.exp(self.log_std) * self.rng.standard_normal(self.log_std.shape)
 
     def act(self, obs, reward: float | None = None, deterministic: bool = True):
         """The env action for observation ``obs`` (obs_dim,), the masked one for NoVel ids (``make_env``).
@@ -163,7 +168,10 @@ class SavedAgent:
             self.context = np.clip((self.context - mean) / np.sqrt(var + NORM_EPSILON), -NORM_CLIP, NORM_CLIP
                                    ).astype(np.float32)
         self._critic_in = self.context if not self.recurrent else self._state[1][0]
-        self.head = _mlp(self._actor, self.context)
+        if self.sde:
+            self.head, self._latent = _mlp(self._actor, self.context, features=True)
+        else:
+            self.head = _mlp(self._actor, self.context)
         self._previous = action = self._choose(self.head, deterministic)
         return action
 
@@ -199,7 +207,12 @@ class SavedAgent:
         if self.env.action.discrete:
             noise = 0.0 if deterministic else self.rng.gumbel(size=head.shape)
             return int(np.argmax(head + noise))
-        action = head if deterministic else head + np.exp(self.log_std) * self.rng.standard_normal(head.shape)
+        if deterministic:
+            action = head
+        elif self.sde:
+            action = head + self._latent @ self._exploration
+        else:
+            action = head + np.exp(self.log_std) * self.rng.standard_normal(head.shape)
         return np.clip(action, self._low, self._high).astype(np.float32)
 
     # -- what the policy thinks ----------------------------------------------------------------------------
@@ -213,10 +226,15 @@ class SavedAgent:
 
     @property
     def std(self) -> np.ndarray:
-        """(action_dim,) the Gaussian policy's standard deviation (Box actions)."""
+        """(action_dim,) the Gaussian policy's standard deviation (Box actions); with gSDE, at the last ``act``'s
+        features: sqrt(z² · exp(log_std)² + 1e-6)."""
         if self.log_std is None:
             raise ConfigError("a Discrete agent has no standard deviation; see probabilities")
-        return np.exp(self.log_std)
+        if not self.sde:
+            return np.exp(self.log_std)
+        if self._latent is None:
+            raise ConfigError("a gSDE agent's standard deviation depends on its input: call act() first")
+        return np.sqrt(np.square(self._latent) @ np.square(np.exp(self.log_std)) + 1e-6)
 
     @property
     def value(self) -> float:

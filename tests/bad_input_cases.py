@@ -56,6 +56,10 @@ CASES = [
     ("train --vf-coef -1", "ermrl train: error: vf_coef must be >= 0 and finite, got -1.0; SB3's default is 0.5"),
     ("train --max-grad-norm 0",
      "ermrl train: error: max_grad_norm must be positive and finite, got 0.0; SB3's default is 0.5"),
+    ("train --use-sde", "ermrl train: error: --use-sde needs continuous (Box) actions; CartPoleNoVel-v1's actions are "
+                        "discrete"),
+    ("train --env PendulumNoVel-v1 --use-sde --sde-sample-freq 0",
+     "ermrl train: error: sde_sample_freq must be -1 (one exploration matrix per rollout) or >= 1, got 0"),
     ("train --model lstm --normalize",
      "ermrl train: error: normalize is not available with model 'lstm' yet; train PPO-LSTM without --normalize"),
     ("train --gamma x", "ermrl train: error: argument --gamma: invalid float value: 'x'; see `ermrl train --help`"),
@@ -97,7 +101,8 @@ CASES = [
      "backend, batch-size, bias, bias-scaling, clip-range, ent-coef, env, env-workers, feed-action, first-seed, "
      "gae-lambda, gamma, input-connectivity, iss, lr, lstm-hidden, lstm-seq-len, max-grad-norm, model, n-envs, "
      "n-epochs, n-steps, no-reservoir, normalize, observed-units, out, ppo-lr, preset, quiet, rc-connectivity, reservoirs, "
-     "save-agents, seeds, skip-connection, snapshot-every, sr, tensorboard, timesteps, units, vf-coef"),
+     "save-agents, sde-sample-freq, seeds, skip-connection, snapshot-every, sr, tensorboard, timesteps, units, use-sde, "
+     "vf-coef"),
     ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "
                                 "integer"),
     ("train --config float.toml", "ermrl train: error: config file float.toml: units must be an integer, got 2.5"),

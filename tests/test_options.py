@@ -36,7 +36,8 @@ def test_every_training_command_takes_every_agent_option_from_one_definition():
                          "feed_action": AgentConfig.feed_action, "skip_connection": False,
                          "observed_units": AgentConfig.observed_units, "preset": "sb3", "ppo_lr": None,
                          "timesteps": TrainConfig.total_timesteps, "backend": TrainConfig.backend,
-                         "env_workers": TrainConfig.env_workers, "normalize": None,
+                         "env_workers": TrainConfig.env_workers, "normalize": None, "use_sde": None,
+                         "sde_sample_freq": None,
                          **dict.fromkeys(PPO_FIELDS)}  # None: the preset's value
     assert set(expected_defaults) == set(AGENT_DESTS)
     for dest in AGENT_DESTS:
@@ -92,21 +93,25 @@ def test_ppo_hyperparameters_override_the_preset_and_reach_the_training(tmp_path
     by one, in every training command; the run trains with them: SB3's stopping rule counts n_envs × n_steps."""
     zoo = ["--n-envs", "2", "--n-steps", "32", "--batch-size", "16", "--gamma", "0.9", "--gae-lambda", "0.8",
            "--n-epochs", "3", "--clip-range", "0.1", "--ent-coef", "0.01", "--vf-coef", "0.25", "--max-grad-norm", "1",
-           "--normalize"]
+           "--normalize", "--use-sde", "--sde-sample-freq", "4"]
     expected = {"n_envs": 2, "n_steps": 32, "batch_size": 16, "gamma": 0.9, "gae_lambda": 0.8, "n_epochs": 3,
-                "clip_range": 0.1, "ent_coef": 0.01, "vf_coef": 0.25, "max_grad_norm": 1.0, "normalize": True}
+                "clip_range": 0.1, "ent_coef": 0.01, "vf_coef": 0.25, "max_grad_norm": 1.0, "normalize": True,
+                "use_sde": True, "sde_sample_freq": 4}
     for command in ("train", "evolve", "baselines --env CartPole-v1"):
         ppo = options.ppo_config(parse([*command.split(), *zoo, "--preset", "fast", "--ppo-lr", "1e-3"]))
         assert {k: getattr(ppo, k) for k in expected} == expected and ppo.learning_rate == 1e-3, command
     fast = options.ppo_config(parse(["evolve", "--preset", "fast", "--gamma", "0.9"]))  # the rest stays the preset's
     assert (fast.n_envs, fast.n_steps, fast.n_epochs, fast.gamma, fast.normalize) == (8, 256, 4, 0.9, False)
     out = tmp_path / "run"
-    r = ermrl("train", "--no-reservoir", "--seeds", "1", "--timesteps", "200", *zoo, "--out", str(out), "--quiet")
+    r = ermrl("train", "--env", "PendulumNoVel-v1", "--no-reservoir", "--seeds", "1", "--timesteps", "200", *zoo,
+              "--out", str(out), "--quiet")  # gSDE needs Box actions
     assert r.returncode == 0, r.stderr
+    assert "no fitness: no episode finished (train for longer than one episode)" in r.stdout  # 128 < 200 steps
     config = json.loads((out / "config.json").read_text())["train"]["ppo"]
     assert {k: config[k] for k in expected} == expected
     assert json.loads((out / "summary.json").read_text())["total_timesteps"] == 256  # 4 rollouts of 2 × 32 steps
-    assert load_agent(out).context_norm["mean"].shape == (2,)  # plain PPO on CartPoleNoVel: its 2 observed dims
+    saved = load_agent(out)
+    assert saved.context_norm["mean"].shape == (2,) and saved.sde  # plain PPO on PendulumNoVel: cos θ and sin θ
 
 
 def test_reservoirpy_hyperparameters_reach_the_reservoirs_drawn(tmp_path):

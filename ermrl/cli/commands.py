@@ -132,7 +132,7 @@ def _check_phi(phi) -> None:
 def cmd_train(args) -> int:
     import numpy as np
 
-    from ermrl import agent_files, envs, storage
+    from ermrl import agent_files, storage
     from ermrl.agent import Phi
     from ermrl.analysis import tensorboard
     from ermrl.analysis.plots import learning_curves
@@ -140,7 +140,7 @@ def cmd_train(args) -> int:
     from ermrl.training import Population, Trainer
 
     k = 0 if args.no_reservoir or args.model == "lstm" else args.reservoirs
-    envs.describe(args.env, args.backend)  # fail fast on an unknown id or a missing extra
+    options.describe_env(args, args.env)  # fail fast on an unknown id, a missing extra or settings it cannot take
     if args.tensorboard is not None:
         tensorboard.check_logdir(args.tensorboard)
     if args.seeds < 1:
@@ -183,8 +183,10 @@ def cmd_train(args) -> int:
     fit = results.fitness()
     for seed, f in zip(results.seeds, fit):
         print(f"seed {seed}: fitness {f:.2f} (mean return of the last 10 training episodes)")
-    print(f"mean fitness {np.nanmean(fit):.2f} ± {np.nanstd(fit):.2f} | {results.agent_steps_per_s():,.0f} agent-steps/s, "
-          f"compile {results.compile_s:.1f}s, train {results.train_s:.1f}s")
+    mean = (f"mean fitness {np.nanmean(fit):.2f} ± {np.nanstd(fit):.2f}" if np.isfinite(fit).any()
+            else "no fitness: no episode finished (train for longer than one episode)")
+    print(f"{mean} | {results.agent_steps_per_s():,.0f} agent-steps/s, compile {results.compile_s:.1f}s, "
+          f"train {results.train_s:.1f}s")
     if not results.finite.all():
         print(f"warning: {int((~results.finite).sum())} agent(s) diverged (NaN/inf); their fitness is NaN", file=sys.stderr)
     print(f"wrote {out}/ (config.json, episodes.csv, curves.csv, summary.json, learning_curve.png"
@@ -218,7 +220,7 @@ def cmd_evolve(args) -> int:
 
     import optuna
 
-    from ermrl import envs, storage
+    from ermrl import storage
     from ermrl.cli.progress import EvolutionBar
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.evolve import count, estimate_seconds, evolve, make_trainers
@@ -230,7 +232,7 @@ def cmd_evolve(args) -> int:
         raise ConfigError(f"unknown sampler {args.sampler!r}; choose one of {', '.join(SAMPLERS)}")
     env_ids = tuple(args.env or ["CartPoleNoVel-v1"])
     for env_id in env_ids:
-        envs.describe(env_id, args.backend)
+        options.describe_env(args, env_id)
     if args.sampler_seed is not None and args.sampler_seed < 0:
         raise ConfigError(f"--sampler-seed must be >= 0, got {args.sampler_seed}")
     config = EvolveConfig(train=options.train_config(args, env_ids[0]), space=options.search_space(args),
@@ -375,11 +377,10 @@ def cmd_report(args) -> int:
 
 
 def cmd_baselines(args) -> int:
-    from ermrl import envs
     from ermrl.experiments import baseline_runs, baselines
 
     for env_id in args.env:
-        envs.describe(env_id, args.backend)
+        options.describe_env(args, env_id)
     if args.seeds < 1 or args.random_episodes < 1:
         raise ConfigError(f"--seeds and --random-episodes must be >= 1, got {args.seeds} and {args.random_episodes}")
     ppo = options.ppo_config(args)

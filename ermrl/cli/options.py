@@ -125,7 +125,11 @@ def _groups() -> dict[str, list[Option]]:
                          help=f"Default: the preset's ({getattr(PPOConfig(), name)} in sb3).",
                          kwargs={"type": kind, "default": None}) for name, kind in PPO_FIELDS.items()),
                 Option("--normalize", PPOConfig, "normalize", help="Default: off (SB3's PPO, the paper).",
-                       kwargs={"action": argparse.BooleanOptionalAction, "default": None})],
+                       kwargs={"action": argparse.BooleanOptionalAction, "default": None}),
+                Option("--use-sde", PPOConfig, "use_sde", help="Default: off (SB3's PPO, the paper).",
+                       kwargs={"action": argparse.BooleanOptionalAction, "default": None}),
+                Option("--sde-sample-freq", PPOConfig, "sde_sample_freq", help="Default: -1.",
+                       kwargs={"type": int, "default": None})],
         "search": [Option("--trials", EvolveConfig, "trials", kwargs={"type": int}),
                    Option("--sampler", help="cmaes (Optuna's CmaEsSampler, the paper), random or tpe.",
                           default="cmaes"),
@@ -170,8 +174,11 @@ PPO_FIELDS = {"n_envs": int, "n_steps": int, "batch_size": int, "n_epochs": int,
 """The PPOConfig fields that have a flag of their own (``--gamma``, ``--n-steps``, ...), named as SB3's arguments;
 each overrides the preset's value, as ``--ppo-lr`` does (e.g. rl-baselines3-zoo's tuned settings for an env)."""
 
+PPO_SWITCHES = ("normalize", "use_sde", "sde_sample_freq")
+"""The PPOConfig fields beyond SB3's PPO defaults that rl-baselines3-zoo's settings use, with flags of their own."""
+
 AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connectivity", "bias_scaling", "feed_action",
-               "skip_connection", "observed_units", "preset", "ppo_lr", *PPO_FIELDS, "normalize", "timesteps",
+               "skip_connection", "observed_units", "preset", "ppo_lr", *PPO_FIELDS, *PPO_SWITCHES, "timesteps",
                "backend", "env_workers")
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
@@ -213,9 +220,18 @@ def ppo_config(args):
     changes = {name: getattr(args, name) for name in PPO_FIELDS if getattr(args, name, None) is not None}
     if args.ppo_lr is not None:
         changes["learning_rate"] = args.ppo_lr
-    if getattr(args, "normalize", None) is not None:
-        changes["normalize"] = args.normalize
+    changes.update({name: getattr(args, name) for name in PPO_SWITCHES if getattr(args, name, None) is not None})
     return dataclasses.replace(ppo, **changes) if changes else ppo
+
+
+def describe_env(args, env_id: str):
+    """``env_id``'s EnvInfo, checked before any work: an unknown id or a missing simulator, and PPO settings that
+    cannot act in it (``--use-sde`` with discrete actions), each a one-line ConfigError."""
+    from ermrl import envs
+
+    info = envs.describe(env_id, args.backend)
+    ppo_config(args).check_actions(env_id, info.action.discrete)
+    return info
 
 
 def train_config(args, env_id: str, reservoirs: int | None = None):

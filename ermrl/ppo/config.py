@@ -48,6 +48,13 @@ class PPOConfig:
     """Normalize what the policy sees (the context) and the rewards with running statistics, as SB3's
     ``VecNormalize`` (rl-baselines3-zoo's ``normalize: True``; :mod:`ermrl.ppo.normalize`). Off in SB3's
     PPO and in the paper. Left out of a config's record while off, so that older studies and stores match."""
+    use_sde: bool = dataclasses.field(default=False, metadata={OMIT_WHEN_DEFAULT: True})
+    """gSDE, generalized State-Dependent Exploration (SB3's ``use_sde``; Box actions only): the policy's noise is
+    the actor's last hidden features times an exploration matrix held for ``sde_sample_freq`` steps, its scale
+    learnt per feature and action dim (:mod:`ermrl.ppo.networks`). Off in SB3's PPO and in the paper; rl-zoo's
+    Pendulum settings use it."""
+    sde_sample_freq: int = dataclasses.field(default=-1, metadata={OMIT_WHEN_DEFAULT: True})
+    """With ``use_sde``: steps between new exploration matrices; -1 draws one per rollout (SB3's default)."""
     model: Literal["ff", "lstm"] = "ff"
     """Policy model: "ff", SB3's MlpPolicy on the context (what ER-MRL and plain PPO use); "lstm", the recurrent
     baseline, sb3-contrib RecurrentPPO's MlpLstmPolicy (separate actor and critic LSTMs on the raw observation,
@@ -86,17 +93,27 @@ class PPOConfig:
             if not 0 <= getattr(self, name) < float("inf"):
                 raise ConfigError(f"{name} must be >= 0 and finite, got {getattr(self, name)}; SB3's default is "
                                   f"{default}")
+        if self.sde_sample_freq != -1 and self.sde_sample_freq < 1:
+            raise ConfigError(f"sde_sample_freq must be -1 (one exploration matrix per rollout) or >= 1, got "
+                              f"{self.sde_sample_freq}")
         if self.model not in ("ff", "lstm"):
             raise ConfigError(f"model must be 'ff' or 'lstm', got {self.model!r}")
         if self.model == "lstm":
-            if self.normalize:
-                raise ConfigError("normalize is not available with model 'lstm' yet; train PPO-LSTM without "
-                                  "--normalize")
+            for name in ("normalize", "use_sde"):
+                if getattr(self, name):
+                    flag = name.replace("_", "-")
+                    raise ConfigError(f"{name} is not available with model 'lstm' yet; train PPO-LSTM without "
+                                      f"--{flag}")
             if min(self.lstm_hidden_size, self.lstm_seq_len) < 1:
                 raise ConfigError("lstm_hidden_size and lstm_seq_len must be >= 1")
             if self.batch_size % self.lstm_seq_len:
                 raise ConfigError(f"batch_size {self.batch_size} must be a multiple of lstm_seq_len "
                                   f"{self.lstm_seq_len} (a minibatch is whole sequences)")
+
+    def check_actions(self, env_id: str, discrete: bool) -> None:
+        """ConfigError when these settings cannot act in ``env_id`` (gSDE needs Box actions, as in SB3)."""
+        if self.use_sde and discrete:
+            raise ConfigError(f"--use-sde needs continuous (Box) actions; {env_id}'s actions are discrete")
 
     @property
     def buffer_size(self) -> int:

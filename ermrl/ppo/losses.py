@@ -58,9 +58,9 @@ def bootstrapped_gae(reward, value, done, truncated, final_value, last_value, ga
 
 def ppo_loss(params: PolicyParams, net: ActorCritic, batch: Batch, config: PPOConfig):
     """Clipped surrogate + vf_coef·MSE − ent_coef·entropy on one minibatch. Returns (loss, metrics)."""
-    head = net.head(params, batch.context)
-    log_prob = net.log_prob(params, head, batch.action)
-    entropy = net.entropy(params, head)
+    head, latent = net.policy(params, batch.context)
+    log_prob = net.log_prob(params, head, batch.action, latent)
+    entropy = net.entropy(params, head, latent)
     value = net.value(params, batch.context)
 
     adv = batch.advantage

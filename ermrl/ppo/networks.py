@@ -2,6 +2,12 @@
 
 Gains: √2 for hidden layers, 0.01 for the policy head, 1 for the value head; biases 0. Box actions get a
 Gaussian with a state-independent log std; Discrete actions a Categorical over logits.
+
+With ``use_sde`` (SB3's gSDE, generalized State-Dependent Exploration, with its defaults ``full_std=True``,
+``use_expln=False``, ``learn_features=False``) the Box policy's noise is ``z · M``: z the actor's last hidden
+features (L,), M an (L, action_dim) exploration matrix drawn from N(0, exp(log_std)²) and held for several
+steps; so π(·|c) = N(μ(c), z² · exp(log_std)² + 1e-6) per action dim, with z treated as a constant (no gradient
+through the features into the variance).
 """
 
 from __future__ import annotations
@@ -44,33 +50,41 @@ class MLP(nn.Module):
     head_gain: float
 
     @nn.compact
-    def __call__(self, x):
+    def __call__(self, x, features: bool = False):
+        """(..., out), or with ``features`` (output, the last hidden layer (..., hidden[-1]))."""
         for width in self.hidden:
             x = nn.Dense(width, kernel_init=orthogonal(np.sqrt(2)), bias_init=nn.initializers.zeros)(x)
             x = jnp.tanh(x)
-        return nn.Dense(self.out, kernel_init=orthogonal(self.head_gain), bias_init=nn.initializers.zeros)(x)
+        out = nn.Dense(self.out, kernel_init=orthogonal(self.head_gain), bias_init=nn.initializers.zeros)(x)
+        return (out, x) if features else out
 
 
 class PolicyParams(NamedTuple):
     actor: dict
     critic: dict
     log_std: jax.Array | None
-    """(action_dim,) for Box; None for Discrete."""
+    """(action_dim,) for Box; (hidden[-1], action_dim) for Box with gSDE; None for Discrete."""
 
 
 class ActorCritic:
     """Pure functions over :class:`PolicyParams`. Inputs have shape (..., context_dim)."""
 
-    def __init__(self, action: ActionSpace, hidden: Sequence[int], log_std_init: float = 0.0):
+    SDE_EPSILON = 1e-6
+    """Added to gSDE's variance (SB3's ``StateDependentNoiseDistribution.epsilon``)."""
+
+    def __init__(self, action: ActionSpace, hidden: Sequence[int], log_std_init: float = 0.0, use_sde: bool = False):
         self.action = action
         self.log_std_init = log_std_init
+        self.use_sde = use_sde and not action.discrete
+        self.latent_dim = tuple(hidden)[-1]
         self.actor = MLP(tuple(hidden), action.policy_dim, 0.01)
         self.critic = MLP(tuple(hidden), 1, 1.0)
 
     def init(self, key: jax.Array, context_dim: int) -> PolicyParams:
         ka, kc = jax.random.split(key)
         x = jnp.zeros((context_dim,), jnp.float32)
-        log_std = None if self.action.discrete else jnp.full((self.action.dim,), self.log_std_init, jnp.float32)
+        shape = (self.latent_dim, self.action.dim) if self.use_sde else (self.action.dim,)
+        log_std = None if self.action.discrete else jnp.full(shape, self.log_std_init, jnp.float32)
         return PolicyParams(actor=self.actor.init(ka, x), critic=self.critic.init(kc, x), log_std=log_std)
 
     def value(self, params: PolicyParams, context: jax.Array) -> jax.Array:
@@ -81,35 +95,54 @@ class ActorCritic:
         """(..., policy_dim): logits (Discrete) or Gaussian means (Box)."""
         return self.actor.apply(params.actor, context)
 
+    def policy(self, params: PolicyParams, context: jax.Array) -> tuple[jax.Array, jax.Array | None]:
+        """(:meth:`head`, the actor's last hidden features (..., latent_dim) with gSDE, else None)."""
+        if not self.use_sde:
+            return self.head(params, context), None
+        return self.actor.apply(params.actor, context, features=True)
+
     def noise(self, key: jax.Array, batch_shape: tuple[int, ...]) -> jax.Array:
-        """(*batch_shape, policy_dim) float32 sampling noise: Gumbel for Discrete (the Gumbel-max trick of
-        ``jax.random.categorical``), standard normal for Box. Drawn apart from :meth:`sample` so that a
-        rollout can draw all its steps' noise in one batched call."""
-        shape = (*batch_shape, self.action.policy_dim)
+        """float32 sampling noise, drawn apart from :meth:`sample` so that a rollout can draw all its steps' noise in
+        one batched call: (*batch_shape, policy_dim), Gumbel for Discrete (the Gumbel-max trick of
+        ``jax.random.categorical``), standard normal for Box; with gSDE (*batch_shape, latent_dim, action_dim),
+        standard normal, the exploration matrix before its scale exp(log_std)."""
         if self.action.discrete:
-            return jax.random.gumbel(key, shape, jnp.float32)
+            return jax.random.gumbel(key, (*batch_shape, self.action.policy_dim), jnp.float32)
+        shape = (*batch_shape, self.latent_dim, self.action.dim) if self.use_sde else (*batch_shape, self.action.dim)
         return jax.random.normal(key, shape, jnp.float32)
 
-    def sample(self, params: PolicyParams, head: jax.Array, noise: jax.Array) -> jax.Array:
+    def sample(self, params: PolicyParams, head: jax.Array, noise: jax.Array, latent: jax.Array | None = None):
         """An action per row from :meth:`noise`'s draw: int32 (...,) for Discrete (the same action as
-        ``jax.random.categorical`` with that key), float32 (..., dim) for Box (unclipped)."""
+        ``jax.random.categorical`` with that key), float32 (..., dim) for Box (unclipped); with gSDE
+        μ + z · (exp(log_std) ⊙ ε), z = ``latent`` (..., latent_dim)."""
         if self.action.discrete:
             return jnp.argmax(noise + head, axis=-1).astype(jnp.int32)
+        if self.use_sde:
+            return head + jnp.einsum("...l,...ld->...d", latent, jnp.exp(params.log_std) * noise)
         return head + jnp.exp(params.log_std) * noise
 
-    def log_prob(self, params: PolicyParams, head: jax.Array, action: jax.Array) -> jax.Array:
-        """(...,) log π(action)."""
+    def _log_std(self, params: PolicyParams, latent: jax.Array | None) -> jax.Array:
+        """(..., action_dim) or (action_dim,): the Gaussian's log std per action dim."""
+        if not self.use_sde:
+            return params.log_std
+        z = jax.lax.stop_gradient(latent)  # SB3's learn_features=False
+        variance = jnp.square(z) @ jnp.square(jnp.exp(params.log_std))
+        return 0.5 * jnp.log(variance + self.SDE_EPSILON)
+
+    def log_prob(self, params: PolicyParams, head: jax.Array, action: jax.Array,
+                 latent: jax.Array | None = None) -> jax.Array:
+        """(...,) log π(action); ``latent``: :meth:`policy`'s features, with gSDE."""
         if self.action.discrete:
             logp = jax.nn.log_softmax(head, axis=-1)
             return jnp.take_along_axis(logp, action[..., None].astype(jnp.int32), axis=-1)[..., 0]
-        log_std = params.log_std
+        log_std = self._log_std(params, latent)
         z = (action - head) * jnp.exp(-log_std)
         return jnp.sum(-0.5 * z**2 - log_std - 0.5 * jnp.log(2 * jnp.pi), axis=-1)
 
-    def entropy(self, params: PolicyParams, head: jax.Array) -> jax.Array:
+    def entropy(self, params: PolicyParams, head: jax.Array, latent: jax.Array | None = None) -> jax.Array:
         """(...,) entropy of π."""
         if self.action.discrete:
             logp = jax.nn.log_softmax(head, axis=-1)
             return -jnp.sum(jnp.exp(logp) * logp, axis=-1)
-        per_dim = 0.5 + 0.5 * jnp.log(2 * jnp.pi) + params.log_std
-        return jnp.broadcast_to(jnp.sum(per_dim), head.shape[:-1])
+        per_dim = 0.5 + 0.5 * jnp.log(2 * jnp.pi) + self._log_std(params, latent)
+        return jnp.broadcast_to(jnp.sum(per_dim, axis=-1), head.shape[:-1])

@@ -25,7 +25,7 @@ from ermrl.envs.host_backend import HostEnv
 from ermrl.envs.host_groups import Stepped
 from ermrl.envs.jax_backend import Transition
 from ermrl.ppo.config import PPOConfig
-from ermrl.training.rollout import EnvCarry, Step, act, advance
+from ermrl.training.rollout import EnvCarry, Step, act, advance, draw_noise
 
 
 def pack_step(step: Step) -> jax.Array:
@@ -63,10 +63,10 @@ class HostIteration:
         self.step_like: Step | None = None
 
         def begin(key):
-            """(next key, action noise (n_steps, n_envs, policy_dim), update key): the JAX backend's keys."""
+            """(next key, action noise (n_steps, n_envs, ...), update key): the JAX backend's keys."""
             key, k_roll, k_update = jax.random.split(key, 3)
             k_act = jax.vmap(lambda k: jax.random.split(k)[0])(jax.random.split(k_roll, ppo.n_steps))
-            return key, jax.vmap(lambda k: net.noise(k, (ppo.n_envs,)))(k_act), k_update
+            return key, draw_noise(net, k_act, ppo.n_envs, ppo.sde_sample_freq), k_update
 
         choose = functools.partial(act, net)  # (params, context, noise) -> Act
 

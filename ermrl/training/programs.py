@@ -31,8 +31,9 @@ def make_agent_fns(config: TrainConfig) -> AgentFns:
         return make_recurrent_fns(config)
     env = envs.make(config.env_id, config.backend, config.env_workers)
     agent = Agent(config.agent, env.info)
-    net = ActorCritic(env.info.action, config.ppo.hidden, config.ppo.log_std_init)
     ppo = config.ppo
+    ppo.check_actions(config.env_id, env.info.action.discrete)
+    net = ActorCritic(env.info.action, ppo.hidden, ppo.log_std_init, ppo.use_sde)
 
     def init(seed, unit_weights, phi: Phi, learning_rate, first_obs) -> AgentState:
         key = jax.random.PRNGKey(seed)
@@ -61,7 +62,7 @@ def make_agent_fns(config: TrainConfig) -> AgentFns:
     def iteration(state: AgentState) -> tuple[AgentState, IterationLog]:
         key, k_roll, k_update = jax.random.split(state.key, 3)
         carry, steps = collect(env, agent, net, state.learner.params, state.reservoirs, state.envs, k_roll,
-                               ppo.n_steps, ppo.gamma)
+                               ppo.n_steps, ppo.gamma, ppo.sde_sample_freq)
         return learn(state._replace(key=key), carry, steps, k_update)
 
     return AgentFns(env, agent, net, init, iteration, learn)

@@ -88,15 +88,28 @@ def start_from_obs(agent: Agent, res: Reservoirs, obs: jax.Array, env_state: Any
 
 
 def act(net: ActorCritic, params: PolicyParams, context: jax.Array, noise: jax.Array) -> Act:
-    """Samples actions for contexts (n_envs, context_dim) with ``net.noise``'s draw (n_envs, policy_dim)."""
+    """Samples actions for contexts (n_envs, context_dim) with ``net.noise``'s draw (n_envs, ...)."""
     action_space = net.action
-    head = net.head(params, context)
-    action = net.sample(params, head, noise)
+    head, latent = net.policy(params, context)
+    action = net.sample(params, head, noise, latent)
     if action_space.discrete:
         env_action = action
     else:
         env_action = jnp.clip(action, jnp.asarray(action_space.low), jnp.asarray(action_space.high))
-    return Act(action, env_action, net.log_prob(params, head, action), net.value(params, context))
+    return Act(action, env_action, net.log_prob(params, head, action, latent), net.value(params, context))
+
+
+def draw_noise(net: ActorCritic, step_keys: jax.Array, n_envs: int, sde_sample_freq: int) -> jax.Array:
+    """Every step's action noise, (n_steps, n_envs, ...), one draw per step from its key in ``step_keys``
+    (n_steps, 2). With gSDE each env keeps its exploration matrix for ``sde_sample_freq`` steps (-1: the whole
+    rollout), as SB3's ``reset_noise`` at a rollout's start and every ``sde_sample_freq`` steps."""
+    n_steps = step_keys.shape[0]
+    noise = jax.vmap(lambda k: net.noise(k, (n_envs,)))(step_keys)
+    if net.use_sde:
+        block = jnp.arange(n_steps) // sde_sample_freq * sde_sample_freq if sde_sample_freq > 0 else \
+            jnp.zeros(n_steps, jnp.int32)
+        noise = noise[block]
+    return noise
 
 
 def advance(agent: Agent, res: Reservoirs, carry: EnvCarry, chosen: Act, tr: Transition,
@@ -134,7 +147,7 @@ def advance(agent: Agent, res: Reservoirs, carry: EnvCarry, chosen: Act, tr: Tra
 
 def collect(
     env: JaxEnv, agent: Agent, net: ActorCritic, params: PolicyParams, res: Reservoirs, carry: EnvCarry,
-    key: jax.Array, n_steps: int, gamma: float,
+    key: jax.Array, n_steps: int, gamma: float, sde_sample_freq: int = -1,
 ) -> tuple[EnvCarry, Step]:
     """Runs n_steps steps in each env. Returns the final carry and the stacked steps (n_steps, n_envs, ...)."""
     n_envs = carry.context.shape[0]
@@ -143,7 +156,7 @@ def collect(
     # the ones a per-step split would give: noise (n_steps, n_envs, policy_dim), key_step (n_steps, n_envs, 2),
     # restart fields (n_steps, n_envs, ...).
     k_act, k_env = jnp.moveaxis(jax.vmap(jax.random.split)(jax.random.split(key, n_steps)), 1, 0)
-    noise = jax.vmap(lambda k: net.noise(k, (n_envs,)))(k_act)
+    noise = draw_noise(net, k_act, n_envs, sde_sample_freq)
     key_step, restart = jax.vmap(lambda k: jax.vmap(env.draw)(jax.random.split(k, n_envs)))(k_env)
 
     def body(carry: EnvCarry, drawn):
