@@ -755,7 +755,7 @@ step_pendulum_rlzoo_sde() {  # the Pendulum target, rl-zoo's PendulumNoVel recip
       "masked, zoo + gSDE=$d/ppo/summary.json" "full obs, zoo + gSDE=$d/ppo-full-obs/summary.json" \
       --compare "evolved, zoo + gSDE" "evolved, paper" --compare "evolved, zoo + gSDE" "evolved, zoo" \
       --compare "default Φ, zoo + gSDE" "default Φ, paper" \
-      --title "rl-zoo's settings with normalization and gSDE, 500 units, test seeds" --figure "$d/pendulum.png" \
+      --title "rl-zoo + normalize + gSDE, 500 units" --figure "$d/pendulum.png" \
       | tee "$d/summary.md"
   "$E" analyze evaluate "$d"/{evolved-500u,default-phi-500u,ppo,ppo-full-obs} --episodes 50 --out "$d/evaluation.md"
 }
