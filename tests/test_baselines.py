@@ -67,6 +67,19 @@ def test_ppo_entries_are_kept_apart_by_their_ppo_settings(tmp_path):
     assert bl.ppo_settings(FAST) == {"n_envs": 8, "n_steps": 256, "batch_size": 512, "n_epochs": 4}
 
 
+def test_an_entrys_recorded_command_gives_back_its_settings():
+    """The command kept with a PPO entry reruns it: parsed again, its flags give the same settings."""
+    import shlex
+
+    from ermrl.cli import options, parse
+    from ermrl.experiments.baseline_runs import _flags
+    from ermrl.ppo.config import PPOConfig
+
+    settings = bl.ppo_settings(PPOConfig(gamma=0.9, n_steps=512, normalize=True, use_sde=True, sde_sample_freq=4))
+    argv = shlex.split(" ".join(["baselines", "--env", "Pendulum-v1", *_flags(settings)]))
+    assert bl.ppo_settings(options.ppo_config(parse(argv))) == settings
+
+
 def test_a_damaged_table_is_a_one_line_error(tmp_path):
     path = tmp_path / "t.json"
     path.write_text('{"random": [}')

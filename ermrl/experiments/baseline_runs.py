@@ -17,9 +17,16 @@ def _command(argv: list[str]) -> str:
 
 
 def _flags(settings: dict) -> list[str]:
-    """The `ermrl baselines` flags of PPO settings (:func:`baselines.ppo_settings`), e.g. ['--gamma', '0.9']."""
-    return [a for k, v in settings.items() for a in (f"--{k.replace('_', '-')}", f"{v:g}" if isinstance(v, float)
-                                                     else str(v))]
+    """The `ermrl baselines` flags of PPO settings (:func:`baselines.ppo_settings`), e.g. ['--gamma', '0.9'];
+    a switch is its flag alone (``--normalize``, ``--no-normalize``)."""
+    out = []
+    for k, v in settings.items():
+        flag = k.replace("_", "-")
+        if isinstance(v, bool):
+            out.append(f"--{flag}" if v else f"--no-{flag}")
+        else:
+            out += [f"--{flag}", f"{v:g}" if isinstance(v, float) else str(v)]
+    return out
 
 
 def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path: Path | None,
