@@ -58,9 +58,9 @@ def rms_update(rms: RunningMeanStd, batch: jax.Array) -> RunningMeanStd:
     return RunningMeanStd(rms.mean + delta * n / total, m2 / total, total)
 
 
-def normalize(rms: RunningMeanStd, x: jax.Array, clip: float = CLIP_OBS) -> jax.Array:
-    """x (..., *shape) standardized by ``rms`` and clipped to ±clip."""
-    return jnp.clip((x - rms.mean) / jnp.sqrt(rms.var + EPSILON), -clip, clip)
+def normalize(rms: RunningMeanStd, x: jax.Array) -> jax.Array:
+    """x (..., *shape) standardized by ``rms`` and clipped to ±CLIP_OBS."""
+    return jnp.clip((x - rms.mean) / jnp.sqrt(rms.var + EPSILON), -CLIP_OBS, CLIP_OBS)
 
 
 class Normalizer(NamedTuple):
