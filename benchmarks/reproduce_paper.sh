@@ -759,6 +759,69 @@ step_pendulum_rlzoo_sde() {  # the Pendulum target, rl-zoo's PendulumNoVel recip
       | tee "$d/summary.md"
   "$E" analyze evaluate "$d"/{evolved-500u,default-phi-500u,ppo,ppo-full-obs} --episodes 50 --out "$d/evaluation.md"
 }
+step_pendulum_rlzoo_policy() {  # the Pendulum target, rl-zoo's PendulumNoVel policy: one 64-unit hidden layer,
+  # ReLU, no orthogonal init (--net-arch 64 --activation relu --no-ortho-init, new 2026-11-27; parity with SB3's
+  # ActorCriticPolicy in tests/test_policy_arch.py), the reservoir in place of its LSTM. Decided before any of it ran:
+  # (zoo) rl-zoo's whole recipe as far as ermrl follows it, step pendulum_rlzoo_sde's flags with that policy, and
+  # (paper) the paper's PPO settings with that policy; for each, the 8-seed near-default Φ* at 500 units on the
+  # development seeds 1010-1019, then on the test seeds once whatever the first result, and the default Φ on the
+  # test seeds; 1M steps each. ≈ 8 min a model here
+  local d=docs/data/pendulum-rlzoo-policy s=pendulum-500u-near-default-wide e=docs/data/deterministic-eval phi
+  local z=docs/data/pendulum-rlzoo-sde m=docs/data/pendulum-500u-near-default-wide/seeds-1010 v
+  phi=$(phi_flags "docs/data/$s/studies.log" "$s")
+  local policy=(--net-arch 64 --activation relu --no-ortho-init)
+  local zoo=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2
+             --ent-coef 0.0 --use-sde --sde-sample-freq 4 --normalize "${policy[@]}")
+  local paper=(--ppo-lr 1e-4 "${policy[@]}")
+  for v in zoo paper; do
+    local -n flags=$v
+    # shellcheck disable=SC2086
+    [ -f "$d/dev/evolved-$v/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 "${flags[@]}" $phi \
+        --seeds 10 --first-seed 1010 --timesteps 1000000 --no-save-agents --quiet --out "$d/dev/evolved-$v"
+    rm -f "$d/dev/evolved-$v/episodes.csv"
+  done
+  .venv/bin/python benchmarks/variant_summary.py "evolved, zoo policy=$d/dev/evolved-zoo/summary.json" \
+      "evolved, paper + zoo policy=$d/dev/evolved-paper/summary.json" "evolved, paper=$m/evolved/summary.json" \
+      "evolved, zoo + gSDE=$z/dev/evolved/summary.json" \
+      --compare "evolved, zoo policy" "evolved, zoo + gSDE" --compare "evolved, paper + zoo policy" "evolved, paper" \
+      --title "500 units, seeds 1010-1019" --figure "$d/dev/pendulum.png" | tee "$d/dev/summary.md"
+  for v in zoo paper; do
+    local -n flags=$v
+    # shellcheck disable=SC2086
+    train_saved "$d/evolved-$v" --env PendulumNoVel-v1 --units 500 "${flags[@]}" $phi
+    train_saved "$d/default-phi-$v" --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 --iss 1.0 "${flags[@]}"
+  done
+  .venv/bin/python benchmarks/variant_summary.py "evolved, zoo policy=$d/evolved-zoo/summary.json" \
+      "evolved, paper + zoo policy=$d/evolved-paper/summary.json" \
+      "evolved, paper=$e/pendulum-500u-near-default-wide/summary.json" "evolved, zoo + gSDE=$z/evolved-500u/summary.json" \
+      "default Φ, zoo policy=$d/default-phi-zoo/summary.json" \
+      "default Φ, paper + zoo policy=$d/default-phi-paper/summary.json" \
+      "default Φ, paper=$e/pendulum-default-phi-500u/summary.json" \
+      --compare "evolved, zoo policy" "evolved, zoo + gSDE" --compare "evolved, paper + zoo policy" "evolved, paper" \
+      --compare "default Φ, zoo policy" "default Φ, paper" --compare "default Φ, paper + zoo policy" "default Φ, paper" \
+      --title "rl-zoo's policy (ReLU, [64], no orthogonal init), 500 units, test seeds" --figure "$d/pendulum.png" \
+      | tee "$d/summary.md"
+  "$E" analyze evaluate "$d"/{evolved-zoo,evolved-paper,default-phi-zoo,default-phi-paper} --episodes 50 \
+      --out "$d/evaluation.md"
+}
+step_pendulum_rlzoo_lstm() {  # the Pendulum target's source: rl-zoo's own PendulumNoVel-v1 agent, RecurrentPPO with
+  # its tuned settings (hyperparams/ppo_lstm.yml: 4 envs × 1024 steps, γ 0.9, GAE λ 0.95, 10 epochs, lr 1e-3, clip
+  # 0.2, gSDE every 4 steps, normalize; policy_kwargs: ortho_init=False, ReLU, lstm_hidden_size=64,
+  # enable_critic_lstm, net_arch pi [64] vf [64]; RecurrentPPO's default batch_size 128, here one 128-step window
+  # a minibatch), trained by ermrl's PPO-LSTM on the test seeds, at rl-zoo's 100k steps and at the test phase's 1M,
+  # agents saved; then each scored both ways: the paper's (the last 10 training episodes, stochastic) and rl-zoo's
+  # (`analyze evaluate`, 50 deterministic episodes; rl-zoo's benchmark.md: -217.9 ± 140.1 over 750 episodes)
+  local d=docs/data/pendulum-rlzoo-lstm t
+  local zoo=(--env PendulumNoVel-v1 --model lstm --n-envs 4 --n-steps 1024 --batch-size 128 --lstm-seq-len 128
+             --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2 --ent-coef 0.0 --use-sde
+             --sde-sample-freq 4 --normalize --net-arch 64 --activation relu --no-ortho-init)
+  for t in 100000 1000000; do
+    [ -f "$d/lstm-$t/summary.json" ] || "$E" train "${zoo[@]}" --seeds 10 --first-seed 1000 --timesteps "$t" \
+        --quiet --out "$d/lstm-$t"
+    rm -f "$d/lstm-$t/episodes.csv"
+  done
+  "$E" analyze evaluate "$d"/lstm-{100000,1000000} --episodes 50 --out "$d/evaluation.md"
+}
 train_saved() {  # train_saved OUT ARGS...: `ermrl train ARGS` on the test seeds, 10 × 1M, agents saved in OUT/agents/
   # (episodes.csv is left out of the repository: the curves and the per-seed scores are in curves.csv and summary.json)
   [ -f "$1/summary.json" ] || "$E" train --seeds 10 --first-seed 1000 --timesteps 1000000 "${@:2}" --quiet --out "$1"
@@ -788,7 +851,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo pendulum_normalize pendulum_rlzoo_sde other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo pendulum_normalize pendulum_rlzoo_sde pendulum_rlzoo_policy pendulum_rlzoo_lstm other_hps)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do

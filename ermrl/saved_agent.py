@@ -46,11 +46,17 @@ class DeleteDims(gym.ObservationWrapper):
         return observation[self.kept]
 
 
-def _mlp(layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray, features: bool = False):
-    """The tanh MLP of :class:`ermrl.ppo.networks.MLP`: (in,) -> (out,), the last layer linear; with
+ACTIVATIONS = {"tanh": np.tanh, "relu": lambda x: np.maximum(x, 0.0)}
+"""NumPy twins of :data:`ermrl.ppo.networks.ACTIVATIONS`."""
+
+
+def _mlp(layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray, features: bool = False,
+         activation: str = "tanh"):
+    """The MLP of :class:`ermrl.ppo.networks.MLP`: (in,) -> (out,), the last layer linear; with
     ``features``, (out, the last hidden layer)."""
+    act = ACTIVATIONS[activation]
     for kernel, bias in layers[:-1]:
-        x = np.tanh(x @ kernel + bias)
+        x = act(x @ kernel + bias)
     kernel, bias = layers[-1]
     return (x @ kernel + bias, x) if features else x @ kernel + bias
 
@@ -85,10 +91,15 @@ class SavedAgent:
                  sampling_seed: int = 0, context_norm: dict | None = None):
         self.path = Path(path)
         self.meta = meta
-        model = (meta.get("train", {}).get("ppo") or {}).get("model", "ff")
+        ppo = meta.get("train", {}).get("ppo") or {}
+        model = ppo.get("model", "ff")
         if model not in ("ff", "lstm"):
             raise ConfigError(f"{path} holds a {model!r} policy; load_agent runs the policies of ER-MRL, PPO and "
                               "PPO-LSTM only")
+        self.activation: str = ppo.get("activation", "tanh")  # left out of the record while tanh
+        if self.activation not in ACTIVATIONS:
+            raise ConfigError(f"{path} holds a policy with a {self.activation!r} activation; load_agent runs tanh "
+                              "and relu MLPs only")
         try:
             self.env: EnvInfo = storage.from_dict(EnvInfo, meta["env"], "env")
             self.config: AgentConfig = storage.from_dict(AgentConfig, meta["train"]["agent"], "train.agent")
@@ -108,7 +119,7 @@ class SavedAgent:
         self.log_std = None if log_std is None else np.asarray(log_std, np.float32)
         self.sde = self.log_std is not None and self.log_std.ndim == 2  # gSDE (PPOConfig.use_sde)
         self.context_norm = context_norm  # {"mean", "var"}: frozen statistics of a normalized agent, else None
-        if bool((meta.get("train", {}).get("ppo") or {}).get("normalize")) != (context_norm is not None):
+        if bool(ppo.get("normalize")) != (context_norm is not None):
             raise ConfigError(f"{path} is not a complete ermrl agent file (normalization statistics "
                               f"{'missing' if context_norm is None else 'without normalize'}); retrain, or load "
                               "another agent")
@@ -162,18 +173,25 @@ class SavedAgent:
                               "(act(obs, reward)); call reset() when a new episode starts")
         else:
             action_enc, r = self._encode(self._previous), float(reward)
-        self.context = self._observe(obs, action_enc, r)
-        if self.context_norm is not None:  # as in training, with the statistics frozen (VecNormalize.training=False)
-            mean, var = self.context_norm["mean"], self.context_norm["var"]
-            self.context = np.clip((self.context - mean) / np.sqrt(var + NORM_EPSILON), -NORM_CLIP, NORM_CLIP
-                                   ).astype(np.float32)
+        if self.recurrent:  # a normalized PPO-LSTM normalizes what its LSTMs see
+            self.context = self._observe(self._normalized(obs), action_enc, r)
+        else:
+            self.context = self._normalized(self._observe(obs, action_enc, r))
         self._critic_in = self.context if not self.recurrent else self._state[1][0]
         if self.sde:
-            self.head, self._latent = _mlp(self._actor, self.context, features=True)
+            self.head, self._latent = _mlp(self._actor, self.context, True, self.activation)
         else:
-            self.head = _mlp(self._actor, self.context)
+            self.head = _mlp(self._actor, self.context, activation=self.activation)
         self._previous = action = self._choose(self.head, deterministic)
         return action
+
+    def _normalized(self, x: np.ndarray) -> np.ndarray:
+        """x standardized as in training, with the statistics frozen (VecNormalize.training=False); x itself
+        for an agent trained without ``normalize``."""
+        if self.context_norm is None:
+            return x
+        mean, var = self.context_norm["mean"], self.context_norm["var"]
+        return np.clip((x - mean) / np.sqrt(var + NORM_EPSILON), -NORM_CLIP, NORM_CLIP).astype(np.float32)
 
     def _encode(self, env_action) -> np.ndarray:
         """(feature_dim,): one-hot for Discrete, the clipped Box action; constant with feed_action="none"."""
@@ -241,7 +259,7 @@ class SavedAgent:
         """The critic's V(c_t) of the last ``act``."""
         if self.context is None:
             raise ConfigError("value needs an act() first")
-        return float(_mlp(self._critic, self._critic_in)[0])
+        return float(_mlp(self._critic, self._critic_in, activation=self.activation)[0])
 
     # -- its env ----------------------------------------------------------------------------------------------
     def make_env(self, render_mode: str | None = None, **kwargs) -> gym.Env:

@@ -60,8 +60,12 @@ CASES = [
                         "discrete"),
     ("train --env PendulumNoVel-v1 --use-sde --sde-sample-freq 0",
      "ermrl train: error: sde_sample_freq must be -1 (one exploration matrix per rollout) or >= 1, got 0"),
-    ("train --model lstm --normalize",
-     "ermrl train: error: normalize is not available with model 'lstm' yet; train PPO-LSTM without --normalize"),
+    ("train --net-arch 64 0",
+     "ermrl train: error: net_arch must be one or more layer widths >= 1, got [64, 0]; SB3's default is 64 64"),
+    ("train --activation sigmoid", "ermrl train: error: argument --activation: invalid choice: 'sigmoid' (choose from "
+                                   "'tanh', 'relu'); see `ermrl train --help`"),
+    ("train --model lstm --use-sde", "ermrl train: error: --use-sde needs continuous (Box) actions; CartPoleNoVel-v1's "
+                                     "actions are discrete"),
     ("train --gamma x", "ermrl train: error: argument --gamma: invalid float value: 'x'; see `ermrl train --help`"),
     ("train --reservoirs 2 --sr 1 2 3", "ermrl train: error: --sr got 3 values for 2 reservoirs; give one value or 2"),
     ("train --model lstm --skip-connection",
@@ -98,11 +102,11 @@ CASES = [
                                 "did you mean 'units'?"),
     ("train --config evolvekey.toml",
      "ermrl train: error: config file evolvekey.toml: unknown option 'trials' for `ermrl train`; options here: "
-     "backend, batch-size, bias, bias-scaling, clip-range, ent-coef, env, env-workers, feed-action, first-seed, "
-     "gae-lambda, gamma, input-connectivity, iss, lr, lstm-hidden, lstm-seq-len, max-grad-norm, model, n-envs, "
-     "n-epochs, n-steps, no-reservoir, normalize, observed-units, out, ppo-lr, preset, quiet, rc-connectivity, reservoirs, "
-     "save-agents, sde-sample-freq, seeds, skip-connection, snapshot-every, sr, tensorboard, timesteps, units, use-sde, "
-     "vf-coef"),
+     "activation, backend, batch-size, bias, bias-scaling, clip-range, ent-coef, env, env-workers, feed-action, "
+     "first-seed, gae-lambda, gamma, input-connectivity, iss, lr, lstm-hidden, lstm-seq-len, max-grad-norm, model, "
+     "n-envs, n-epochs, n-steps, net-arch, no-reservoir, normalize, observed-units, ortho-init, out, ppo-lr, preset, "
+     "quiet, rc-connectivity, reservoirs, save-agents, sde-sample-freq, seeds, skip-connection, snapshot-every, sr, "
+     "tensorboard, timesteps, units, use-sde, vf-coef"),
     ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "
                                 "integer"),
     ("train --config float.toml", "ermrl train: error: config file float.toml: units must be an integer, got 2.5"),

@@ -75,9 +75,11 @@ def test_an_entrys_recorded_command_gives_back_its_settings():
     from ermrl.experiments.baseline_runs import _flags
     from ermrl.ppo.config import PPOConfig
 
-    settings = bl.ppo_settings(PPOConfig(gamma=0.9, n_steps=512, normalize=True, use_sde=True, sde_sample_freq=4))
-    argv = shlex.split(" ".join(["baselines", "--env", "Pendulum-v1", *_flags(settings)]))
-    assert bl.ppo_settings(options.ppo_config(parse(argv))) == settings
+    for ppo in (PPOConfig(gamma=0.9, n_steps=512, normalize=True, use_sde=True, sde_sample_freq=4),
+                PPOConfig(hidden=(64,), activation="relu", ortho_init=False)):  # rl-zoo's recurrent Pendulum policy
+        settings = bl.ppo_settings(ppo)
+        argv = shlex.split(" ".join(["baselines", "--env", "Pendulum-v1", *_flags(settings)]))
+        assert bl.ppo_settings(options.ppo_config(parse(argv))) == settings
 
 
 def test_a_damaged_table_is_a_one_line_error(tmp_path):

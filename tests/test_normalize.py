@@ -15,7 +15,6 @@ import ermrl
 from ermrl import agent_files
 from ermrl.agent import Phi
 from ermrl import storage
-from ermrl.errors import ConfigError
 from ermrl.experiments import baselines
 from ermrl.ppo import normalize
 from ermrl.ppo.config import PPOConfig
@@ -161,8 +160,3 @@ def test_an_unnormalized_config_keeps_its_record_and_settings():
     assert storage.from_dict(TrainConfig, plain) == TrainConfig()
     assert baselines.ppo_settings(PPOConfig()) == {}
     assert baselines.ppo_settings(PPOConfig(normalize=True)) == {"normalize": True}
-
-
-def test_normalize_is_refused_with_the_lstm_baseline():
-    with pytest.raises(ConfigError, match="^normalize is not available with model 'lstm' yet"):
-        PPOConfig(model="lstm", normalize=True)

@@ -12,6 +12,7 @@ from ermrl.agent import AgentConfig
 from ermrl.cli import build_parser, parse
 from ermrl.cli import options
 from ermrl.cli.options import AGENT_DESTS, PPO_FIELDS, field_docs
+from ermrl.errors import ConfigError
 from ermrl.ppo.config import PPOConfig
 from ermrl.reservoir import ReservoirSpec
 from ermrl.training import TrainConfig
@@ -37,7 +38,7 @@ def test_every_training_command_takes_every_agent_option_from_one_definition():
                          "observed_units": AgentConfig.observed_units, "preset": "sb3", "ppo_lr": None,
                          "timesteps": TrainConfig.total_timesteps, "backend": TrainConfig.backend,
                          "env_workers": TrainConfig.env_workers, "normalize": None, "use_sde": None,
-                         "sde_sample_freq": None,
+                         "sde_sample_freq": None, "activation": None, "ortho_init": None, "net_arch": None,
                          **dict.fromkeys(PPO_FIELDS)}  # None: the preset's value
     assert set(expected_defaults) == set(AGENT_DESTS)
     for dest in AGENT_DESTS:
@@ -131,7 +132,7 @@ def test_reservoirpy_hyperparameters_reach_the_reservoirs_drawn(tmp_path):
 
 @pytest.mark.parametrize("text, suffix, message", [
     ("unitz = 20\n", ".toml", "unknown option 'unitz' for `ermrl train`; did you mean 'units'?"),
-    ("color = 1\n", ".toml", "unknown option 'color' for `ermrl train`; options here: backend, batch-size, bias, "),
+    ("color = 1\n", ".toml", "unknown option 'color' for `ermrl train`; options here: activation, backend, batch-size, "),
     ('units = "many"\n', ".toml", "units has the wrong type: 'many'"),
     ("units = 2.5\n", ".toml", "units must be an integer, got 2.5"),
     ('bias = "gaussian"\n', ".toml", "bias must be one of bernoulli, none, got 'gaussian'"),
@@ -156,3 +157,12 @@ def test_missing_config_file(tmp_path):
     assert r.returncode == 2
     assert r.stderr == (f"ermrl evolve: error: config file {tmp_path / 'nope.toml'} does not exist; "
                         "give the path of a .toml or .yaml file\n")
+
+
+def test_ppo_settings_are_checked_together():
+    """A PPO-LSTM window longer than the preset's batch is fine when the batch given with it holds whole windows
+    (rl-zoo's RecurrentPPO settings: 128-step minibatches); a batch that does not is one error naming both."""
+    ppo = options.ppo_config(parse(["train", "--model", "lstm", "--batch-size", "128", "--lstm-seq-len", "128"]))
+    assert (ppo.model, ppo.batch_size, ppo.lstm_seq_len) == ("lstm", 128, 128)
+    with pytest.raises(ConfigError, match="^batch_size 64 must be a multiple of lstm_seq_len 128"):
+        options.ppo_config(parse(["train", "--model", "lstm", "--lstm-seq-len", "128"]))

@@ -50,7 +50,7 @@ def test_state_resets_at_an_episode_start():
     state = net.initial_state((1,))._replace(pi=LSTMState(stored.h[:, 0], stored.c[:, 0]))
     step = jax.jit(net.step)
     for t in range(T):
-        state, _, _ = step(params, state, obs[:, t], start[:, t])
+        state, *_ = step(params, state, obs[:, t], start[:, t])
         np.testing.assert_allclose(np.asarray(state.pi.h), h[:, t], rtol=1e-5, atol=1e-6)
 
 
@@ -78,7 +78,7 @@ def test_rollout_stores_the_states_a_rerun_gives(rollout):
 
     @jax.jit
     def step(lstm, obs, start, action):
-        lstm, head, value = net.step(params, lstm, obs, start)
+        lstm, head, value, _ = net.step(params, lstm, obs, start)
         return lstm, net.log_prob(params, head, action), value
 
     for t in range(cfg.ppo.n_steps):
@@ -114,7 +114,7 @@ def test_minibatches_are_whole_windows_that_reproduce_the_rollout(rollout):
     c = jax.tree.map(lambda x: x[agent], carry)
     net = fns.net
     after = jax.tree.map(lambda x, last: jnp.concatenate([x[1:], last[None]]), s.state.vf, c.lstm.vf)
-    _, _, last_value = net.step(params, c.lstm, c.obs, c.episode_start)
+    _, _, last_value, _ = net.step(params, c.lstm, c.obs, c.episode_start)
     adv, ret = bootstrapped_gae(s.reward, s.value, s.done, s.truncated, net.step_value(params, after, s.final_obs),
                                 last_value, ppo.gamma, ppo.gae_lambda)
     batch = recurrent.sequence_batch(s, adv, ret)
@@ -188,33 +188,82 @@ def test_learns_masked_cartpole_where_plain_ppo_cannot():
     assert mean[-1] > 3 * mean[2]  # the curve rises
 
 
-def test_pendulum_population_with_box_actions_saved_and_loaded(tmp_path):
-    """Box actions and time limits; the final policies are saved, and a loaded agent runs the same LSTMs."""
-    cfg = lstm_config("PendulumNoVel-v1", timesteps=2048)
+ZOO = dict(n_envs=2, n_steps=512, batch_size=128, normalize=True, use_sde=True, sde_sample_freq=4, hidden=(64,),
+           activation="relu", ortho_init=False)
+"""rl-baselines3-zoo's PendulumNoVel-v1 RecurrentPPO policy and switches (hyperparams/ppo_lstm.yml), smaller."""
+
+
+@pytest.mark.parametrize("ppo", [{}, ZOO], ids=["sb3", "zoo"])
+def test_pendulum_population_with_box_actions_saved_and_loaded(tmp_path, ppo):
+    """Box actions and time limits; the final policies are saved, and a loaded agent runs the same LSTMs (with
+    rl-zoo's settings: on the observation normalized with the final statistics, and its gSDE log std)."""
+    cfg = lstm_config("PendulumNoVel-v1", timesteps=2048, **ppo)
     res = train(cfg, Population.grid(Phi(1.0, 1.0, 1.0), 2, 3e-4, 0))
     for ep in res.episodes:
         assert ep.length.tolist() == [200] * 10
-        assert np.all(ep.ret < 0) and np.all(ep.ret > -16.3 * 200)
-    assert np.all(res.finite) and res.metrics["value_loss"].shape == (2, 1)
-    assert res.policies.log_std.shape == (2, 1) and res.policies.actor["lstm"]["kernel_h"].shape == (2, 64, 256)
+        assert np.all(ep.ret < 0) and np.all(ep.ret > -16.3 * 200)  # raw returns, normalized or not
+    assert np.all(res.finite) and res.metrics["value_loss"].shape == (2, 2048 // cfg.ppo.buffer_size)
+    sde = cfg.ppo.use_sde
+    assert res.policies.log_std.shape == ((2, 64, 1) if sde else (2, 1))
+    assert res.policies.actor["lstm"]["kernel_h"].shape == (2, 64, 256)
+    assert (res.policies.context_norm is None) != cfg.ppo.normalize
 
     from ermrl import agent_files, load_agent
 
     agent_files.write_agents(tmp_path, cfg, res, "PPO-LSTM")
     agent = load_agent(tmp_path / "seed1.npz")
-    net = RecurrentActorCritic(res.policies.env.action, (64, 64), 64)
+    assert agent.sde == sde and agent.activation == cfg.ppo.activation
+    net = RecurrentActorCritic.of(res.policies.env.action, cfg.ppo)
     one = lambda tree: jax.tree.map(lambda x: jnp.asarray(x[1]), tree)
     params = net.init(jax.random.PRNGKey(0), 2)._replace(actor=one(res.policies.actor), critic=one(res.policies.critic),
                                                          log_std=jnp.asarray(res.policies.log_std[1]))
     obs = np.asarray(jax.random.normal(jax.random.PRNGKey(1), (7, 2)), np.float32)
+    seen = obs
+    if cfg.ppo.normalize:
+        stats = jax.tree.map(lambda x: np.asarray(x[1]), res.policies.context_norm)
+        assert np.abs(stats["mean"]).max() > 0.05 and stats["var"].min() < 0.9  # learnt, not the initial 0 and 1
+        seen = np.clip((obs - stats["mean"]) / np.sqrt(stats["var"] + 1e-8), -10, 10)
     state = net.initial_state(())
     for t in range(7):
         if t == 4:
             agent.reset()  # a new episode: zero states on both sides
-        state, head, value = net.step(params, state, jnp.asarray(obs[t]), jnp.asarray(t in (0, 4)))
+        state, head, value, _ = net.step(params, state, jnp.asarray(seen[t]), jnp.asarray(t in (0, 4)))
         agent.act(obs[t], None if t in (0, 4) else -1.0)
         np.testing.assert_allclose(agent.head, np.asarray(head), rtol=1e-4, atol=1e-5)
         assert agent.value == pytest.approx(float(value), rel=1e-4, abs=1e-5)
+
+
+def test_rollout_with_normalize_and_sde():
+    """With rl-zoo's switches the LSTMs see normalized observations (the next one, un-normalized with the final
+    statistics, lies on Pendulum's unit circle again), PPO learns from scaled rewards (sign kept, not centred)
+    while the episode returns stay raw, and each env's actions are the mean plus the actor's features times one
+    exploration matrix per sde_sample_freq steps."""
+    cfg = lstm_config("PendulumNoVel-v1", timesteps=512, **dict(ZOO, n_envs=1, n_steps=512, sde_sample_freq=128))
+    fns = recurrent.make_recurrent_fns(cfg)
+    state = jax.jit(fns.init)(jnp.uint32(0), None, None, jnp.float32(3e-4), None)
+    carry, steps = jax.jit(lambda s: recurrent.collect(fns.env, fns.net, s.learner.params, s.envs, s.key, 512,
+                                                        cfg.ppo.gamma, 128))(state)
+    stats = carry.norm.context
+    assert float(stats.count) == pytest.approx(513, abs=1e-3)  # the first observation and one per step
+    raw = np.asarray(carry.obs[0] * np.sqrt(stats.var + 1e-8) + stats.mean)
+    assert np.linalg.norm(raw) == pytest.approx(1.0, abs=1e-4) and abs(np.linalg.norm(carry.obs[0]) - 1) > 0.05
+    reward, ret = np.asarray(steps.reward[:, 0]), np.asarray(steps.finished_return[:, 0])
+    assert np.all(reward <= 0) and reward.min() >= -10 and np.abs(reward[100:]).max() < 1  # raw: down to -16.3
+    assert np.all(ret[np.isfinite(ret)] < -200)  # raw returns of 200 steps, not sums of scaled rewards
+    assert np.isfinite(ret).sum() == 2
+
+    params, net = state.learner.params, fns.net
+    lstm, heads, latents = net.initial_state((1,)), [], []
+    for t in range(512):
+        lstm, head, _, latent = net.step(params, lstm, steps.obs[t], steps.episode_start[t])
+        heads.append(np.asarray(head[0])), latents.append(np.asarray(latent[0]))
+    residual, z = np.asarray(steps.action[:, 0]) - np.stack(heads), np.stack(latents)
+    assert z.shape == (512, 64)
+    for start in (0, 128, 384):
+        m, *_ = np.linalg.lstsq(z[start:start + 128], residual[start:start + 128], rcond=None)
+        np.testing.assert_allclose(z[start:start + 128] @ m, residual[start:start + 128], atol=1e-4)
+    m, *_ = np.linalg.lstsq(z[:256], residual[:256], rcond=None)
+    assert np.abs(z[:256] @ m - residual[:256]).max() > 1e-2  # two blocks, two matrices
 
 
 def test_unsupported_combinations_fail_in_one_line():

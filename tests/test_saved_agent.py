@@ -27,10 +27,13 @@ from ermrl.training import Population, TrainConfig, Trainer
 from ermrl.training.results import Episodes, Policies, Results
 
 CASES = {
-    "CartPoleNoVel-v1": (AgentConfig(reservoirs=1), [0, 1]),  # the test phase below compiles the same program
+    "CartPoleNoVel-v1": (AgentConfig(reservoirs=1), [0, 1], SB3_DEFAULTS),  # the test phase compiles the same
     "PendulumNoVel-v1": (AgentConfig(reservoirs=2, spec=ReservoirSpec(units=40), skip_connection=True,
-                                     observed_units=30), [7]),
+                                     observed_units=30), [7], SB3_DEFAULTS),
+    "PendulumNoVel-v1 relu": (AgentConfig(reservoirs=1, spec=ReservoirSpec(units=40)), [2],  # rl-zoo's policy
+                              dataclasses.replace(SB3_DEFAULTS, hidden=(64,), activation="relu", ortho_init=False)),
 }
+"""{label: (agent, seeds, PPO settings)}; a label is the env id, then perhaps a word."""
 
 
 def write_untrained_agent(folder, env_id, agent=AgentConfig(), seed=0, phi=Phi(0.95, 0.5, 1.0)):
@@ -50,10 +53,11 @@ def write_untrained_agent(folder, env_id, agent=AgentConfig(), seed=0, phi=Phi(0
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    """{env_id: (config, results, saved paths, final params of a replayed training)} at 2048 steps."""
+    """{label: (config, results, saved paths, final params of a replayed training)} at 2048 steps."""
     out = {}
-    for env_id, (agent, seeds) in CASES.items():
-        config = TrainConfig(env_id=env_id, total_timesteps=2048, agent=agent, ppo=SB3_DEFAULTS)
+    for label, (agent, seeds, ppo) in CASES.items():
+        env_id = label.split()[0]
+        config = TrainConfig(env_id=env_id, total_timesteps=2048, agent=agent, ppo=ppo)
         population = Population.grid(Phi(0.9, 0.4, 1.2), seeds, 3e-4, agent.reservoirs)
         trainer = Trainer(config)
         results = trainer.run(population)
@@ -61,15 +65,15 @@ def trained(tmp_path_factory):
         for _ in range(trainer.n_iterations):
             state, _ = trainer.step(state)
         folder = tmp_path_factory.mktemp(env_id) / "agents"
-        out[env_id] = (config, results, agent_files.write_agents(folder, config, results, "ER-MRL"),
-                       jax.device_get(state.learner.params))
+        out[label] = (config, results, agent_files.write_agents(folder, config, results, "ER-MRL"),
+                      jax.device_get(state.learner.params))
     return out
 
 
-@pytest.mark.parametrize("env_id", CASES)
-def test_results_carry_the_final_policies_without_padding(trained, env_id):
-    config, results, _, final = trained[env_id]
-    n = len(CASES[env_id][1])
+@pytest.mark.parametrize("label", CASES)
+def test_results_carry_the_final_policies_without_padding(trained, label):
+    config, results, _, final = trained[label]
+    n = len(CASES[label][1])
     policies = results.policies
     leaves = jax.tree.leaves((policies.actor, policies.critic, policies.log_std))
     assert all(x.shape[0] == n and isinstance(x, np.ndarray) for x in leaves)  # padded agents dropped
@@ -84,7 +88,7 @@ def _jax_reference(config, results, i, obs, actions, rewards):
     """Contexts (T, N) and policy heads (T, A) that the training-time JAX code computes for one episode."""
     info = results.policies.env
     agent = Agent(config.agent, info)
-    net = ActorCritic(info.action, config.ppo.hidden, config.ppo.log_std_init)
+    net = ActorCritic.of(info.action, config.ppo)
     take = lambda tree: jax.tree.map(lambda x: jnp.asarray(x[i]), tree)
     log_std = None if results.policies.log_std is None else jnp.asarray(results.policies.log_std[i])
     params = PolicyParams(take(results.policies.actor), take(results.policies.critic), log_std)
@@ -102,9 +106,9 @@ def _jax_reference(config, results, i, obs, actions, rewards):
     return np.stack(contexts), np.stack(heads)
 
 
-@pytest.mark.parametrize("env_id", CASES)
-def test_a_loaded_agent_acts_as_the_training_code(trained, env_id):
-    config, results, paths, _ = trained[env_id]
+@pytest.mark.parametrize("label", CASES)
+def test_a_loaded_agent_acts_as_the_training_code(trained, label):
+    config, results, paths, _ = trained[label]
     i = len(paths) - 1
     agent = ermrl.load_agent(paths[i], sampling_seed=3)
     assert agent.seed == int(results.seeds[i]) and agent.context_dim == Agent(config.agent, agent.env).context_dim
@@ -135,16 +139,17 @@ def test_a_loaded_agent_acts_as_the_training_code(trained, env_id):
 
 
 def test_every_saved_file_is_complete_and_reloads(trained):
-    for env_id, (config, results, paths, _) in trained.items():
+    for label, (config, results, paths, _) in trained.items():
         folder = paths[0].parent
         assert sorted(p.name for p in folder.iterdir()) == sorted(f"seed{s}.npz" for s in results.seeds)
         for path, seed in zip(paths, results.seeds):
             agent = ermrl.load_agent(path)
             meta = agent.meta
-            assert (meta["env_id"], meta["seed"], meta["model"]) == (env_id, seed, "ER-MRL")
+            assert (meta["env_id"], meta["seed"], meta["model"]) == (label.split()[0], seed, "ER-MRL")
             assert meta["ermrl_version"] == ermrl.__version__ and meta["learning_rate"] == pytest.approx(3e-4)
             assert meta["phi"]["sr"] == [pytest.approx(0.9)] * max(config.agent.reservoirs, 1)
             assert storage.from_dict(TrainConfig, meta["train"]) == config
+            assert agent.activation == config.ppo.activation
             assert path.stat().st_size < 200_000
     first = ermrl.load_agent(paths[0].parent.parent)  # a run folder gives its first agent
     assert first.path == paths[0]

@@ -118,10 +118,10 @@ def test_a_saved_gsde_agent_explores_with_one_matrix_per_episode(tmp_path):
 def test_use_sde_is_refused_where_sb3_refuses_it_and_kept_out_of_old_records():
     with pytest.raises(ConfigError, match="^sde_sample_freq must be -1"):
         PPOConfig(use_sde=True, sde_sample_freq=0)
-    with pytest.raises(ConfigError, match="^use_sde is not available with model 'lstm' yet"):
-        PPOConfig(model="lstm", use_sde=True)
-    with pytest.raises(ConfigError, match="^--use-sde needs continuous"):
-        make_agent_fns(TrainConfig(env_id="CartPoleNoVel-v1", ppo=PPOConfig(use_sde=True)))
+    for model in ("ff", "lstm"):
+        with pytest.raises(ConfigError, match="^--use-sde needs continuous"):
+            make_agent_fns(TrainConfig(env_id="CartPoleNoVel-v1", agent=AgentConfig(reservoirs=0),
+                                       ppo=PPOConfig(use_sde=True, model=model)))
     assert "use_sde" not in ermrl.storage.to_dict(PPOConfig())
     assert baselines.ppo_settings(PPOConfig(use_sde=True, sde_sample_freq=4)) == {"use_sde": True,
                                                                                   "sde_sample_freq": 4}

@@ -129,7 +129,13 @@ def _groups() -> dict[str, list[Option]]:
                 Option("--use-sde", PPOConfig, "use_sde", help="Default: off (SB3's PPO, the paper).",
                        kwargs={"action": argparse.BooleanOptionalAction, "default": None}),
                 Option("--sde-sample-freq", PPOConfig, "sde_sample_freq", help="Default: -1.",
-                       kwargs={"type": int, "default": None})],
+                       kwargs={"type": int, "default": None}),
+                Option("--net-arch", PPOConfig, "hidden", help="Default: 64 64 (SB3's MlpPolicy).",
+                       kwargs={"type": int, "nargs": "+", "default": None, "metavar": "WIDTH"}),
+                Option("--activation", PPOConfig, "activation", help="Default: tanh.",
+                       kwargs={"choices": ["tanh", "relu"], "default": None}),
+                Option("--ortho-init", PPOConfig, "ortho_init", help="Default: on.",
+                       kwargs={"action": argparse.BooleanOptionalAction, "default": None})],
         "search": [Option("--trials", EvolveConfig, "trials", kwargs={"type": int}),
                    Option("--sampler", help="cmaes (Optuna's CmaEsSampler, the paper), random or tpe.",
                           default="cmaes"),
@@ -174,12 +180,13 @@ PPO_FIELDS = {"n_envs": int, "n_steps": int, "batch_size": int, "n_epochs": int,
 """The PPOConfig fields that have a flag of their own (``--gamma``, ``--n-steps``, ...), named as SB3's arguments;
 each overrides the preset's value, as ``--ppo-lr`` does (e.g. rl-baselines3-zoo's tuned settings for an env)."""
 
-PPO_SWITCHES = ("normalize", "use_sde", "sde_sample_freq")
-"""The PPOConfig fields beyond SB3's PPO defaults that rl-baselines3-zoo's settings use, with flags of their own."""
+PPO_SWITCHES = ("normalize", "use_sde", "sde_sample_freq", "activation", "ortho_init")
+"""The PPOConfig fields beyond SB3's PPO defaults that rl-baselines3-zoo's settings use, with flags of their own
+(the policy's widths too: ``--net-arch``, PPOConfig.hidden)."""
 
 AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connectivity", "bias_scaling", "feed_action",
-               "skip_connection", "observed_units", "preset", "ppo_lr", *PPO_FIELDS, *PPO_SWITCHES, "timesteps",
-               "backend", "env_workers")
+               "skip_connection", "observed_units", "preset", "ppo_lr", *PPO_FIELDS, *PPO_SWITCHES, "net_arch",
+               "timesteps", "backend", "env_workers")
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
 
@@ -215,12 +222,15 @@ def ppo_config(args):
     from ermrl.ppo.config import PRESETS
 
     ppo = PRESETS[args.preset]
+    changes = {}  # one replace, so that settings are checked together (e.g. batch_size against lstm_seq_len)
     if getattr(args, "model", "ff") == "lstm":  # the "model" options exist on `ermrl train` only
-        ppo = dataclasses.replace(ppo, model="lstm", lstm_hidden_size=args.lstm_hidden, lstm_seq_len=args.lstm_seq_len)
-    changes = {name: getattr(args, name) for name in PPO_FIELDS if getattr(args, name, None) is not None}
+        changes.update(model="lstm", lstm_hidden_size=args.lstm_hidden, lstm_seq_len=args.lstm_seq_len)
+    changes.update({name: getattr(args, name) for name in PPO_FIELDS if getattr(args, name, None) is not None})
     if args.ppo_lr is not None:
         changes["learning_rate"] = args.ppo_lr
     changes.update({name: getattr(args, name) for name in PPO_SWITCHES if getattr(args, name, None) is not None})
+    if getattr(args, "net_arch", None) is not None:
+        changes["hidden"] = tuple(args.net_arch)
     return dataclasses.replace(ppo, **changes) if changes else ppo
 
 

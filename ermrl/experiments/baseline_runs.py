@@ -18,12 +18,14 @@ def _command(argv: list[str]) -> str:
 
 def _flags(settings: dict) -> list[str]:
     """The `ermrl baselines` flags of PPO settings (:func:`baselines.ppo_settings`), e.g. ['--gamma', '0.9'];
-    a switch is its flag alone (``--normalize``, ``--no-normalize``)."""
+    a switch is its flag alone (``--normalize``, ``--no-normalize``), widths one value each (``--net-arch 64``)."""
     out = []
     for k, v in settings.items():
-        flag = k.replace("_", "-")
+        flag = "net-arch" if k == "hidden" else k.replace("_", "-")  # PPOConfig.hidden's flag is SB3's name
         if isinstance(v, bool):
             out.append(f"--{flag}" if v else f"--no-{flag}")
+        elif isinstance(v, (list, tuple)):
+            out += [f"--{flag}", *map(str, v)]
         else:
             out += [f"--{flag}", f"{v:g}" if isinstance(v, float) else str(v)]
     return out

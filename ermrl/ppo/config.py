@@ -41,7 +41,13 @@ class PPOConfig:
     normalize_advantage: bool = True
     """Per-minibatch normalization with the unbiased std, as torch's ``Tensor.std`` computes it."""
     hidden: tuple[int, ...] = (64, 64)
-    """Hidden widths of the separate actor and critic tanh MLPs (SB3 MlpPolicy)."""
+    """Hidden widths of the separate actor and critic MLPs (SB3 MlpPolicy's ``net_arch``, the same for both)."""
+    activation: Literal["tanh", "relu"] = dataclasses.field(default="tanh", metadata={OMIT_WHEN_DEFAULT: True})
+    """The MLPs' hidden activation (SB3's ``activation_fn``: tanh by default; rl-zoo's recurrent Pendulum settings
+    use ReLU). Left out of a config's record while tanh."""
+    ortho_init: bool = dataclasses.field(default=True, metadata={OMIT_WHEN_DEFAULT: True})
+    """SB3's ``ortho_init``: orthogonal weights (gains √2, 0.01 for the policy head, 1 for the value head) and zero
+    biases; off, every layer keeps torch's default ``nn.Linear`` init, U(±1/√fan_in) for weights and biases."""
     log_std_init: float = 0.0
     """Initial state-independent log std of the Gaussian policy (Box actions)."""
     normalize: bool = dataclasses.field(default=False, metadata={OMIT_WHEN_DEFAULT: True})
@@ -96,14 +102,14 @@ class PPOConfig:
         if self.sde_sample_freq != -1 and self.sde_sample_freq < 1:
             raise ConfigError(f"sde_sample_freq must be -1 (one exploration matrix per rollout) or >= 1, got "
                               f"{self.sde_sample_freq}")
+        if self.activation not in ("tanh", "relu"):
+            raise ConfigError(f"activation must be 'tanh' or 'relu', got {self.activation!r}")
+        if not self.hidden or min(self.hidden) < 1:
+            raise ConfigError(f"net_arch must be one or more layer widths >= 1, got {list(self.hidden)}; SB3's "
+                              "default is 64 64")
         if self.model not in ("ff", "lstm"):
             raise ConfigError(f"model must be 'ff' or 'lstm', got {self.model!r}")
         if self.model == "lstm":
-            for name in ("normalize", "use_sde"):
-                if getattr(self, name):
-                    flag = name.replace("_", "-")
-                    raise ConfigError(f"{name} is not available with model 'lstm' yet; train PPO-LSTM without "
-                                      f"--{flag}")
             if min(self.lstm_hidden_size, self.lstm_seq_len) < 1:
                 raise ConfigError("lstm_hidden_size and lstm_seq_len must be >= 1")
             if self.batch_size % self.lstm_seq_len:

@@ -1,7 +1,8 @@
 """Separate actor and critic MLPs as in SB3's MlpPolicy, with SB3's orthogonal initialization.
 
-Gains: √2 for hidden layers, 0.01 for the policy head, 1 for the value head; biases 0. Box actions get a
-Gaussian with a state-independent log std; Discrete actions a Categorical over logits.
+Gains: √2 for hidden layers, 0.01 for the policy head, 1 for the value head; biases 0 (without ``ortho_init``,
+torch's ``nn.Linear`` default instead: weights and biases U(±1/√fan_in)). Hidden layers are tanh (SB3's default)
+or ReLU. Box actions get a Gaussian with a state-independent log std; Discrete actions a Categorical over logits.
 
 With ``use_sde`` (SB3's gSDE, generalized State-Dependent Exploration, with its defaults ``full_std=True``,
 ``use_expln=False``, ``learn_features=False``) the Box policy's noise is ``z · M``: z the actor's last hidden
@@ -42,20 +43,48 @@ def orthogonal(gain: float, iterations: int = 60):
     return init
 
 
+def torch_default_bias(fan_in: int):
+    """torch ``nn.Linear``'s default bias initializer, U(±1/√fan_in) (its weights: :func:`torch_default_kernel`)."""
+    bound = 1.0 / np.sqrt(fan_in)
+
+    def init(key, shape, dtype=jnp.float32):
+        return jax.random.uniform(key, shape, dtype, -bound, bound)
+
+    return init
+
+
+def torch_default_kernel():
+    """torch ``nn.Linear``'s default weight initializer, kaiming_uniform(a=√5): U(±1/√fan_in)."""
+    return nn.initializers.variance_scaling(1.0 / 3.0, "fan_in", "uniform")
+
+
+ACTIVATIONS = {"tanh": jnp.tanh, "relu": jax.nn.relu}
+"""PPOConfig.activation's names and functions."""
+
+
 class MLP(nn.Module):
-    """tanh MLP with orthogonal init; the last layer is linear with gain ``head_gain``."""
+    """An MLP of ``activation`` hidden layers; the last layer is linear. With ``ortho_init`` (SB3's default)
+    orthogonal weights, gain √2 in hidden layers and ``head_gain`` in the last, and zero biases; without it
+    torch's default init for every layer."""
 
     hidden: Sequence[int]
     out: int
     head_gain: float
+    activation: str = "tanh"
+    ortho_init: bool = True
+
+    def _dense(self, width: int, gain: float, fan_in: int) -> nn.Dense:
+        if self.ortho_init:
+            return nn.Dense(width, kernel_init=orthogonal(gain), bias_init=nn.initializers.zeros)
+        return nn.Dense(width, kernel_init=torch_default_kernel(), bias_init=torch_default_bias(fan_in))
 
     @nn.compact
     def __call__(self, x, features: bool = False):
         """(..., out), or with ``features`` (output, the last hidden layer (..., hidden[-1]))."""
+        act = ACTIVATIONS[self.activation]
         for width in self.hidden:
-            x = nn.Dense(width, kernel_init=orthogonal(np.sqrt(2)), bias_init=nn.initializers.zeros)(x)
-            x = jnp.tanh(x)
-        out = nn.Dense(self.out, kernel_init=orthogonal(self.head_gain), bias_init=nn.initializers.zeros)(x)
+            x = act(self._dense(width, np.sqrt(2), x.shape[-1])(x))
+        out = self._dense(self.out, self.head_gain, x.shape[-1])(x)
         return (out, x) if features else out
 
 
@@ -72,13 +101,19 @@ class ActorCritic:
     SDE_EPSILON = 1e-6
     """Added to gSDE's variance (SB3's ``StateDependentNoiseDistribution.epsilon``)."""
 
-    def __init__(self, action: ActionSpace, hidden: Sequence[int], log_std_init: float = 0.0, use_sde: bool = False):
+    def __init__(self, action: ActionSpace, hidden: Sequence[int], log_std_init: float = 0.0, use_sde: bool = False,
+                 activation: str = "tanh", ortho_init: bool = True):
         self.action = action
         self.log_std_init = log_std_init
         self.use_sde = use_sde and not action.discrete
         self.latent_dim = tuple(hidden)[-1]
-        self.actor = MLP(tuple(hidden), action.policy_dim, 0.01)
-        self.critic = MLP(tuple(hidden), 1, 1.0)
+        self.actor = MLP(tuple(hidden), action.policy_dim, 0.01, activation, ortho_init)
+        self.critic = MLP(tuple(hidden), 1, 1.0, activation, ortho_init)
+
+    @classmethod
+    def of(cls, action: ActionSpace, ppo) -> "ActorCritic":
+        """The network of a PPOConfig ``ppo``'s settings."""
+        return cls(action, ppo.hidden, ppo.log_std_init, ppo.use_sde, ppo.activation, ppo.ortho_init)
 
     def init(self, key: jax.Array, context_dim: int) -> PolicyParams:
         ka, kc = jax.random.split(key)

@@ -114,9 +114,16 @@ class RecurrentActorCritic(ActorCritic):
     bias_ih, bias_hh}, "mlp": Flax MLP params}``. :meth:`step` acts during the rollout; :meth:`head` and
     :meth:`value` take :class:`Sequences` and return one row per step, (N·T, ...), in sequence-major order."""
 
-    def __init__(self, action: ActionSpace, hidden: Sequence[int], lstm_hidden: int, log_std_init: float = 0.0):
-        super().__init__(action, hidden, log_std_init)
+    def __init__(self, action: ActionSpace, hidden: Sequence[int], lstm_hidden: int, log_std_init: float = 0.0,
+                 activation: str = "tanh", ortho_init: bool = True, use_sde: bool = False):
+        super().__init__(action, hidden, log_std_init, use_sde, activation, ortho_init)
         self.lstm_hidden = lstm_hidden
+
+    @classmethod
+    def of(cls, action: ActionSpace, ppo) -> "RecurrentActorCritic":
+        """The network of a PPOConfig ``ppo``'s settings (model "lstm")."""
+        return cls(action, ppo.hidden, ppo.lstm_hidden_size, ppo.log_std_init, ppo.activation, ppo.ortho_init,
+                   ppo.use_sde)
 
     def init(self, key: jax.Array, obs_dim: int) -> PolicyParams:
         k_mlp, k_pi, k_vf = jax.random.split(key, 3)
@@ -130,29 +137,39 @@ class RecurrentActorCritic(ActorCritic):
         zero = jnp.zeros((*batch_shape, self.lstm_hidden), jnp.float32)
         return RecurrentState(LSTMState(zero, zero), LSTMState(zero, zero))
 
-    def _head(self, params: PolicyParams, h: jax.Array) -> jax.Array:
-        return self.actor.apply(params.actor["mlp"], h)
+    def _policy(self, params: PolicyParams, h: jax.Array) -> tuple[jax.Array, jax.Array | None]:
+        """(head, the actor MLP's last hidden features with gSDE, else None) of actor LSTM outputs h (..., H)."""
+        if not self.use_sde:
+            return self.actor.apply(params.actor["mlp"], h), None
+        return self.actor.apply(params.actor["mlp"], h, features=True)
 
     def _value(self, params: PolicyParams, h: jax.Array) -> jax.Array:
         return self.critic.apply(params.critic["mlp"], h)[..., 0]
 
     def step(self, params: PolicyParams, state: RecurrentState, obs: jax.Array, episode_start: jax.Array):
         """One rollout step for a batch of envs: obs (..., obs_dim), episode_start (...,) bool, state (..., H).
-        Returns (the new state, head (..., policy_dim), value (...,))."""
+        Returns (the new state, head (..., policy_dim), value (...,), the gSDE features (..., latent_dim) or
+        None)."""
         state = reset(state, episode_start)
         pi = lstm_cell(params.actor["lstm"], state.pi, input_gates(params.actor["lstm"], obs))
         vf = lstm_cell(params.critic["lstm"], state.vf, input_gates(params.critic["lstm"], obs))
-        return RecurrentState(pi, vf), self._head(params, pi.h), self._value(params, vf.h)
+        head, latent = self._policy(params, pi.h)
+        return RecurrentState(pi, vf), head, self._value(params, vf.h), latent
 
     def step_value(self, params: PolicyParams, vf: LSTMState, obs: jax.Array) -> jax.Array:
         """V of ``obs`` fed to the critic LSTM in state ``vf`` without a reset (the value of an episode's final
         observation, for the time-limit bootstrap, as RecurrentPPO computes it)."""
         return self._value(params, lstm_cell(params.critic["lstm"], vf, input_gates(params.critic["lstm"], obs)).h)
 
+    def policy(self, params: PolicyParams, seq: Sequences) -> tuple[jax.Array, jax.Array | None]:
+        """(:meth:`head`, the gSDE features (N·T, latent_dim) or None) along the sequences."""
+        head, latent = self._policy(params, unroll(params.actor["lstm"], seq, seq.state.pi))
+        return (head.reshape(-1, self.action.policy_dim),
+                None if latent is None else latent.reshape(-1, self.latent_dim))
+
     def head(self, params: PolicyParams, seq: Sequences) -> jax.Array:
         """(N·T, policy_dim) logits or means along the sequences."""
-        h = unroll(params.actor["lstm"], seq, seq.state.pi)
-        return self._head(params, h).reshape(-1, self.action.policy_dim)
+        return self.policy(params, seq)[0]
 
     def value(self, params: PolicyParams, seq: Sequences) -> jax.Array:
         """(N·T,) values along the sequences."""

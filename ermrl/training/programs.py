@@ -33,7 +33,7 @@ def make_agent_fns(config: TrainConfig) -> AgentFns:
     agent = Agent(config.agent, env.info)
     ppo = config.ppo
     ppo.check_actions(config.env_id, env.info.action.discrete)
-    net = ActorCritic(env.info.action, ppo.hidden, ppo.log_std_init, ppo.use_sde)
+    net = ActorCritic.of(env.info.action, ppo)
 
     def init(seed, unit_weights, phi: Phi, learning_rate, first_obs) -> AgentState:
         key = jax.random.PRNGKey(seed)

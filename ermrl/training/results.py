@@ -50,7 +50,8 @@ class Policies:
     """(A, action_dim) state-independent log std for Box actions; None for Discrete."""
     context_norm: dict | None = None
     """With ``PPOConfig.normalize``: {"mean": (A, context_dim), "var": (A, context_dim)}, the final running
-    statistics the policy's input is standardized with (:func:`ermrl.ppo.normalize.normalize`); else None."""
+    statistics the policy's input is standardized with (:func:`ermrl.ppo.normalize.normalize`; for PPO-LSTM the
+    observation's, (A, obs_dim), what its LSTMs see); else None."""
 
     @staticmethod
     def from_params(env: EnvInfo, params, n: int, norm=None) -> "Policies":
