@@ -115,15 +115,15 @@ class RecurrentActorCritic(ActorCritic):
     :meth:`value` take :class:`Sequences` and return one row per step, (N·T, ...), in sequence-major order."""
 
     def __init__(self, action: ActionSpace, hidden: Sequence[int], lstm_hidden: int, log_std_init: float = 0.0,
-                 activation: str = "tanh", ortho_init: bool = True, use_sde: bool = False):
+                 use_sde: bool = False, activation: str = "tanh", ortho_init: bool = True):
         super().__init__(action, hidden, log_std_init, use_sde, activation, ortho_init)
         self.lstm_hidden = lstm_hidden
 
     @classmethod
     def of(cls, action: ActionSpace, ppo) -> "RecurrentActorCritic":
         """The network of a PPOConfig ``ppo``'s settings (model "lstm")."""
-        return cls(action, ppo.hidden, ppo.lstm_hidden_size, ppo.log_std_init, ppo.activation, ppo.ortho_init,
-                   ppo.use_sde)
+        return cls(action, ppo.hidden, ppo.lstm_hidden_size, ppo.log_std_init, ppo.use_sde, ppo.activation,
+                   ppo.ortho_init)
 
     def init(self, key: jax.Array, obs_dim: int) -> PolicyParams:
         k_mlp, k_pi, k_vf = jax.random.split(key, 3)
