@@ -814,6 +814,7 @@ step_pendulum_rlzoo_policy() {  # the Pendulum target, rl-zoo's PendulumNoVel po
     rm -f "$d/confirm/default-phi-zoo-$first/episodes.csv"
   done
   .venv/bin/python benchmarks/variant_summary.py "default Φ, zoo policy, 1000-1009=$d/default-phi-zoo/summary.json" \
+      "default Φ, zoo policy, 1000-1029=$d/default-phi-zoo/summary.json,$d/confirm/default-phi-zoo-1010/summary.json,$d/confirm/default-phi-zoo-1020/summary.json" \
       "default Φ, zoo policy, 1010-1019=$d/confirm/default-phi-zoo-1010/summary.json" \
       "default Φ, zoo policy, 1020-1029=$d/confirm/default-phi-zoo-1020/summary.json" \
       "default Φ, paper, 1000-1009=$e/pendulum-default-phi-500u/summary.json" \
