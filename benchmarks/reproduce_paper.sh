@@ -845,6 +845,17 @@ step_pendulum_rlzoo_evolve() {  # the Pendulum target, ER-MRL proper under rl-zo
       --compare "evolved under rl-zoo's recipe" "evolved under the paper's, rl-zoo's recipe" \
       --title "500 units, rl-zoo's recipe, test seeds" --figure "$d/pendulum.png" | tee "$d/summary.md"
   "$E" analyze evaluate "$d/evolved" --episodes 50 --out "$d/evaluation.md"
+  # Added after the test seeds' result, as for the default Φ: the Φ* on the development seeds 1010-1019
+  # shellcheck disable=SC2046
+  [ -f "$d/dev/evolved/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 "${zoo[@]}" \
+      $(phi_flags "$d/studies.log" "$s") --seeds 10 --first-seed 1010 --timesteps 1000000 --no-save-agents --quiet \
+      --out "$d/dev/evolved"
+  rm -f "$d/dev/evolved/episodes.csv"
+  .venv/bin/python benchmarks/variant_summary.py "evolved under rl-zoo's recipe, 1010-1019=$d/dev/evolved/summary.json" \
+      "evolved under rl-zoo's recipe, 1000-1019=$d/evolved/summary.json,$d/dev/evolved/summary.json" \
+      "default Φ, rl-zoo's recipe, 1010-1019=$p/confirm/default-phi-zoo-1010/summary.json" \
+      --compare "evolved under rl-zoo's recipe, 1010-1019" "default Φ, rl-zoo's recipe, 1010-1019" \
+      --title "500 units, rl-zoo's recipe, seeds 1010-1019" | tee "$d/dev/summary.md"
 }
 step_pendulum_rlzoo_lstm() {  # the Pendulum target's source: rl-zoo's own PendulumNoVel-v1 agent, RecurrentPPO with
   # its tuned settings (hyperparams/ppo_lstm.yml: 4 envs × 1024 steps, γ 0.9, GAE λ 0.95, 10 epochs, lr 1e-3, clip
