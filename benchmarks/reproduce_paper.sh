@@ -759,6 +759,10 @@ step_pendulum_rlzoo_sde() {  # the Pendulum target, rl-zoo's PendulumNoVel recip
       | tee "$d/summary.md"
   "$E" analyze evaluate "$d"/{evolved-500u,default-phi-500u,ppo,ppo-full-obs} --episodes 50 --out "$d/evaluation.md"
 }
+# rl-baselines3-zoo's tuned PendulumNoVel-v1 settings (hyperparams/ppo_lstm.yml), and its policy (RLZOO_POLICY)
+RLZOO_PENDULUM=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2
+                --ent-coef 0.0 --use-sde --sde-sample-freq 4 --normalize)
+RLZOO_POLICY=(--net-arch 64 --activation relu --no-ortho-init)
 step_pendulum_rlzoo_policy() {  # the Pendulum target, rl-zoo's PendulumNoVel policy: one 64-unit hidden layer,
   # ReLU, no orthogonal init (--net-arch 64 --activation relu --no-ortho-init, new 2026-11-27; parity with SB3's
   # ActorCriticPolicy in tests/test_policy_arch.py), the reservoir in place of its LSTM. Decided before any of it ran:
@@ -769,10 +773,7 @@ step_pendulum_rlzoo_policy() {  # the Pendulum target, rl-zoo's PendulumNoVel po
   local d=docs/data/pendulum-rlzoo-policy s=pendulum-500u-near-default-wide e=docs/data/deterministic-eval phi
   local z=docs/data/pendulum-rlzoo-sde m=docs/data/pendulum-500u-near-default-wide/seeds-1010 v
   phi=$(phi_flags "docs/data/$s/studies.log" "$s")
-  local policy=(--net-arch 64 --activation relu --no-ortho-init)
-  local zoo=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2
-             --ent-coef 0.0 --use-sde --sde-sample-freq 4 --normalize "${policy[@]}")
-  local paper=(--ppo-lr 1e-4 "${policy[@]}")
+  local zoo=("${RLZOO_PENDULUM[@]}" "${RLZOO_POLICY[@]}") paper=(--ppo-lr 1e-4 "${RLZOO_POLICY[@]}")
   for v in zoo paper; do
     local -n flags=$v
     # shellcheck disable=SC2086
@@ -829,8 +830,7 @@ step_pendulum_rlzoo_evolve() {  # the Pendulum target, ER-MRL proper under rl-zo
   # trained once on the test seeds, 10 × 1M, agents saved, against the default Φ with the same recipe (step
   # pendulum_rlzoo_policy). ≈ 30 min here
   local d=docs/data/pendulum-rlzoo-evolve s=pendulum-500u-rlzoo p=docs/data/pendulum-rlzoo-policy
-  local zoo=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2
-             --ent-coef 0.0 --use-sde --sde-sample-freq 4 --normalize --net-arch 64 --activation relu --no-ortho-init)
+  local zoo=("${RLZOO_PENDULUM[@]}" "${RLZOO_POLICY[@]}")
   mkdir -p "$d"
   "$E" evolve --env PendulumNoVel-v1 --units 500 --reservoirs 1 --fixed-iss 1.0 --trials 30 --seeds 3 --popsize 10 \
       --seed-schedule generation --timesteps 300000 "${zoo[@]}" --min-sr 0.1 --max-sr 10 --min-lr 0.1 --max-lr 1.0 \
@@ -865,9 +865,8 @@ step_pendulum_rlzoo_lstm() {  # the Pendulum target's source: rl-zoo's own Pendu
   # agents saved; then each scored both ways: the paper's (the last 10 training episodes, stochastic) and rl-zoo's
   # (`analyze evaluate`, 50 deterministic episodes; rl-zoo's benchmark.md: -217.9 ± 140.1 over 750 episodes)
   local d=docs/data/pendulum-rlzoo-lstm t
-  local zoo=(--env PendulumNoVel-v1 --model lstm --n-envs 4 --n-steps 1024 --batch-size 128 --lstm-seq-len 128
-             --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2 --ent-coef 0.0 --use-sde
-             --sde-sample-freq 4 --normalize --net-arch 64 --activation relu --no-ortho-init)
+  local zoo=(--env PendulumNoVel-v1 --model lstm "${RLZOO_PENDULUM[@]}" --batch-size 128 --lstm-seq-len 128
+             "${RLZOO_POLICY[@]}")
   for t in 100000 1000000; do
     [ -f "$d/lstm-$t/summary.json" ] || "$E" train "${zoo[@]}" --seeds 10 --first-seed 1000 --timesteps "$t" \
         --quiet --out "$d/lstm-$t"

@@ -62,6 +62,8 @@ CASES = [
      "ermrl train: error: sde_sample_freq must be -1 (one exploration matrix per rollout) or >= 1, got 0"),
     ("train --net-arch 64 0",
      "ermrl train: error: net_arch must be one or more layer widths >= 1, got [64, 0]; SB3's default is 64 64"),
+    ("train --ortho-init=no", "ermrl train: error: argument --ortho-init/--no-ortho-init: ignored explicit argument "
+                              "'no'; see `ermrl train --help`"),
     ("train --activation sigmoid", "ermrl train: error: argument --activation: invalid choice: 'sigmoid' (choose from "
                                    "'tanh', 'relu'); see `ermrl train --help`"),
     ("train --model lstm --use-sde", "ermrl train: error: --use-sde needs continuous (Box) actions; CartPoleNoVel-v1's "

@@ -187,8 +187,7 @@ class Trainer:
             finished, metrics, finite, state, train_s = self._loop(compiled, state, n, compile_s, progress_fn,
                                                                         resumed, saver)
             # the final policies, in one transfer after the loop (the first n agents; padding dropped)
-            norm = getattr(state.envs, "norm", None)  # PPO-LSTM's carry has none
-            params, norm = jax.device_get((state.learner.params, norm))
+            params, norm = jax.device_get((state.learner.params, state.envs.norm))  # norm: None unless normalized
             policies = Policies.from_params(self.env.info, params, n, norm)
         finally:
             self.close()
