@@ -22,6 +22,10 @@ from ermrl.envs.spaces import EnvInfo
 from ermrl.errors import ConfigError
 
 
+MAX_RESERVOIRS = 100
+"""The most reservoirs an agent may have (the paper uses 1 to 3)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class AgentConfig:
     """Static description of an agent's perception (everything here sets shapes)."""
@@ -39,8 +43,8 @@ class AgentConfig:
     """The policy sees only the first k units of each reservoir (None: all of them)."""
 
     def __post_init__(self):
-        if self.reservoirs < 0:
-            raise ConfigError(f"reservoirs must be >= 0, got {self.reservoirs}")
+        if not 0 <= self.reservoirs <= MAX_RESERVOIRS:
+            raise ConfigError(f"reservoirs must be in 0..{MAX_RESERVOIRS}, got {self.reservoirs}")
         if self.feed_action not in ("previous", "none"):
             raise ConfigError(f"feed_action must be 'previous' or 'none', got {self.feed_action!r}")
         if self.observed_units is not None and not 1 <= self.observed_units <= self.spec.units:

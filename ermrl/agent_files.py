@@ -17,6 +17,9 @@ AGENT_FORMAT = "ermrl-agent"
 AGENT_VERSION = 1
 AGENTS_DIR = "agents"
 """A run folder's saved agents live in ``RUN/agents/`` (a test phase: ``agents/MODEL/``)."""
+AGENT_FILES = AGENTS_DIR + r"/(?:[^/]+/)?seed\d+(?:-\d+)?\.npz"
+"""The paths, relative to a run folder, of the agent files :func:`write_agents` writes there: a rerun of the
+run removes those its new agents do not replace (:func:`ermrl.atomic.staged_folder`), and nothing else."""
 
 
 def flatten(tree: dict, prefix: str) -> dict[str, np.ndarray]:

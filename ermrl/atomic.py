@@ -11,9 +11,12 @@ import errno
 import glob
 import json
 import os
+import re
 import shutil
 import socket
+import sys
 import tempfile
+import time
 from pathlib import Path
 
 from ermrl.errors import ConfigError
@@ -25,11 +28,11 @@ def atomic_path(path: Path | str):
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the final file gets the usual permissions
-    try:
+    try:  # from here on, whatever stops the block (an error, SIGTERM as SystemExit) removes the temporary file
+        os.close(fd)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; the final file gets the usual permissions
         yield Path(tmp)
         _fsync(tmp)
         os.replace(tmp, path)
@@ -48,15 +51,16 @@ def _fsync(path: str) -> None:
 
 
 @contextlib.contextmanager
-def staged_folder(folder: Path | str, marker: str = "summary.json"):
+def staged_folder(folder: Path | str, marker: str = "summary.json", stale: str | None = None):
     """Yields a hidden sibling folder, ``.NAME.partial-HOST-PID``, to write ``folder``'s files into; when the block
     ends without error they take ``folder``'s place, so that a crash (even kill -9) leaves ``folder`` as it was or
     complete, never half-written.
 
     A missing or empty ``folder`` is replaced by renaming the staged folder (one atomic step). Into an existing
     one, ``marker`` (the file readers take to mean "complete") is removed first, then every staged file is renamed
-    over its namesake, ``marker`` last; files the stage lacks are removed from its subfolders (old agents) but kept
-    at the top (other commands' outputs, such as analyses). A staging folder left by a killed process is removed
+    over its namesake, ``marker`` last. Files the stage lacks are kept, except those whose path relative to
+    ``folder`` fully matches the regular expression ``stale`` (files of the same writer's earlier run, such as old
+    agents): nothing that the writer never writes is removed. A staging folder left by a killed process is removed
     by the next writer of ``folder`` on the same host."""
     folder = Path(os.path.realpath(folder))
     folder.parent.mkdir(parents=True, exist_ok=True)
@@ -70,7 +74,7 @@ def staged_folder(folder: Path | str, marker: str = "summary.json"):
     stage.mkdir()
     try:
         yield stage
-        _publish(stage, folder, marker)
+        _publish(stage, folder, marker, stale)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
 
@@ -85,7 +89,7 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _publish(stage: Path, folder: Path, marker: str) -> None:
+def _publish(stage: Path, folder: Path, marker: str, stale: str | None) -> None:
     """Moves ``stage``'s files into ``folder`` (see :func:`staged_folder`)."""
     try:
         os.rename(stage, folder)  # replaces a missing or empty folder
@@ -96,9 +100,10 @@ def _publish(stage: Path, folder: Path, marker: str) -> None:
     files = sorted((p.relative_to(stage) for p in stage.rglob("*") if not p.is_dir()), key=lambda p: p == Path(marker))
     with contextlib.suppress(FileNotFoundError):
         (folder / marker).unlink()
-    for sub in {p.parts[0] for p in files if len(p.parts) > 1}:
-        for old in (folder / sub).rglob("*") if (folder / sub).is_dir() else ():
-            if not old.is_dir() and not (stage / old.relative_to(folder)).exists():
+    if stale is not None:
+        for old in folder.rglob("*"):
+            path = old.relative_to(folder)
+            if re.fullmatch(stale, path.as_posix()) and not old.is_dir() and not (stage / path).exists():
                 old.unlink()
     for p in files:
         (folder / p).parent.mkdir(parents=True, exist_ok=True)
@@ -111,12 +116,10 @@ def repair_journal(path: Path | str) -> int:
     make the whole journal unreadable. Done under the journal's own lock, so a live writer is never cut short,
     and only after a whole line that is a journal record, so that a file that is no journal is never touched.
     Returns the number of bytes cut (0 for a sound, missing or foreign file)."""
-    from optuna.storages.journal import JournalFileSymlinkLock
-
     path = Path(path)
     if not _torn(path):
         return 0
-    lock = JournalFileSymlinkLock(str(path))  # what JournalFileBackend appends under by default
+    lock = journal_lock(path)  # what the journal storage appends under (evolution.study.make_storage)
     lock.acquire()
     try:
         if not _torn(path):
@@ -139,6 +142,66 @@ def repair_journal(path: Path | str) -> int:
         return size - end
     finally:
         lock.release()
+
+
+JOURNAL_LOCK_GRACE_S = 30
+"""A journal lock held this long is stale and broken: Optuna's own rule (its ``grace_period``). A writer holds it
+for one append, milliseconds."""
+
+
+def journal_lock(path: Path | str, grace_period: float = JOURNAL_LOCK_GRACE_S):
+    """The lock that every ermrl process writes the Optuna journal file ``path`` under: Optuna's symlink lock
+    (the link ``PATH.lock``, so that ermrl and plain Optuna exclude each other) on the absolute path, whose wait
+    never spins and always breaks a stale lock (:class:`_JournalLock`)."""
+    from optuna.storages.journal import JournalFileSymlinkLock
+
+    class _JournalLock(JournalFileSymlinkLock):
+        """Optuna's wait (5.0) reads the lock's age through the link, so a link left dangling by a process that
+        died holding it (a relative path: ``d/j.log.lock -> d/j.log`` points to ``d/d/j.log``) has no age: it
+        retries at once, forever, at 100% CPU. This one reads the link itself (``lstat``): a lock is stale once
+        the same link has stood for ``grace_period`` seconds, seen by this process or by its time stamp, and
+        is then broken (with a note on stderr). It sleeps between tries, and never removes a lock it does not
+        hold when stopped while waiting."""
+
+        def acquire(self) -> bool:
+            seen, since, delay = None, time.monotonic(), 0.001
+            while True:
+                try:
+                    os.symlink(self._lock_target_file, self._lock_file)
+                    return True
+                except FileExistsError:
+                    pass
+                try:
+                    st = os.lstat(self._lock_file)
+                except FileNotFoundError:
+                    continue  # released meanwhile: try again at once
+                stamp = (st.st_ino, st.st_mtime_ns)
+                now = time.monotonic()
+                if stamp != seen:
+                    seen, since = stamp, now
+                if max(now - since, time.time() - st.st_mtime) > self.grace_period:
+                    self._break(st.st_ino)
+                    delay = 0.001
+                    continue
+                time.sleep(delay)
+                delay = min(2 * delay, 0.25)
+
+        def _break(self, inode: int) -> None:
+            """Removes the stale lock link ``inode``; a link another process made meanwhile is put back."""
+            aside = f"{self._lock_file}.stale-{os.getpid()}"
+            try:
+                os.rename(self._lock_file, aside)
+            except FileNotFoundError:
+                return
+            if os.lstat(aside).st_ino != inode:  # another waiter broke it first and now holds a new one
+                with contextlib.suppress(FileExistsError):
+                    os.link(aside, self._lock_file, follow_symlinks=False)
+            else:
+                print(f"note: removed the stale lock {self._lock_file} (held for over {self.grace_period:g} s: "
+                      "a process stopped while writing the journal)", file=sys.stderr)
+            os.unlink(aside)
+
+    return _JournalLock(os.path.abspath(path), grace_period)
 
 
 def _after_last_newline(f, end: int) -> int:
@@ -176,13 +239,13 @@ def check_folder(path: Path | str, flag: str = "--out") -> Path:
         if not p.is_dir():
             where = f"{flag} {p}" if p == path else f"{flag} {path}: its parent {p}"
             raise ConfigError(f"{where} is a file, not a folder; give a folder path (it is created if missing)")
-        if (reason := _cannot_write(p)) is not None:
+        if (reason := cannot_write(p)) is not None:
             raise ConfigError(f"{flag} {path}: cannot write in {p} ({reason}); give a folder you can write")
         return path
     return path
 
 
-def _cannot_write(folder: Path) -> str | None:
+def cannot_write(folder: Path) -> str | None:
     """Why nothing can be created in ``folder``, else None. Tried for real (an empty folder made and removed):
     permission bits do not bind root, and a read-only mount or a pseudo file system refuses anyone."""
     try:
@@ -205,7 +268,7 @@ def check_file(path: Path | str, flag: str = "--out", example: str = "NAME.png")
             continue
         if not p.is_dir():
             raise ConfigError(f"{flag} {path}: its parent {p} is a file, not a folder; give a path in a folder")
-        if (reason := _cannot_write(p)) is not None:
+        if (reason := cannot_write(p)) is not None:
             raise ConfigError(f"{flag} {path}: cannot write in {p} ({reason}); give a folder you can write")
         break
     return path

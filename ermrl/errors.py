@@ -6,6 +6,12 @@ TERMINATED = 143
 """The exit status of a command stopped by SIGTERM (128 + 15, as a shell reports a process killed by it)."""
 
 
+def raise_terminated(signum, frame) -> None:
+    """A SIGTERM handler: SIGTERM as ``SystemExit(TERMINATED)``, so that the ``finally`` blocks run (a temporary
+    file or a staging folder removed, nothing half-written) before the command ends with exit status 143."""
+    raise SystemExit(TERMINATED)
+
+
 class ConfigError(ValueError):
     """Bad input from the user (unknown env id, bad bounds, bad storage URL, ...).
 

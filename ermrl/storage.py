@@ -273,6 +273,36 @@ def write_train_run(out: Path, config, results, label: str, effective: dict | No
     return run
 
 
+RUN_RECORDS = {"train": ("config.json", "`ermrl train`"), "test": ("test_config.json", "`ermrl test`")}
+"""{kind of run folder: (the record it always holds, the command that writes it)}."""
+
+
+def run_kind(folder: Path | str) -> str | None:
+    """"train" or "test" when ``folder`` holds that kind of run's record (:data:`RUN_RECORDS`), else None."""
+    folder = Path(folder)
+    if (folder / RUN_RECORDS["test"][0]).is_file():
+        return "test"
+    try:
+        record = read_json(folder / RUN_RECORDS["train"][0])
+    except (OSError, ValueError):
+        return None
+    return "train" if isinstance(record, dict) and "train" in record else None
+
+
+def check_rerun_folder(folder: Path | str, kind: str, flag: str = "--out") -> Path:
+    """``folder`` if a run of ``kind`` may be written there: it is missing, empty, or holds such a run (a rerun
+    replaces its files). Otherwise ConfigError before any work: a rerun removes its old agents, so a folder of
+    other files (a test phase given to ``ermrl train``, the current folder) is never written into."""
+    folder = Path(folder)
+    names = sorted(p.name for p in folder.iterdir()) if folder.is_dir() else []
+    if names and run_kind(folder) != kind:
+        record, command = RUN_RECORDS[kind]
+        shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+        raise ConfigError(f"{flag} {folder} holds files that {command} did not write ({shown}) and no {record} "
+                          f"of its run; give a new or empty folder, or one that {command} wrote")
+    return folder
+
+
 def run_env_id(folder: Path) -> str | None:
     """The env id a run folder was trained on, from its config.json (None when it has none)."""
     path = Path(folder) / "config.json"
@@ -301,9 +331,101 @@ def _fmt_cell(v) -> str:
     return "" if v is None else str(v)
 
 
+TEST_SUMMARY_FIELDS = {"model": "text", "env_id": "text", "n_seeds": "count", "final_mean": "number|null",
+                       "final_std": "number|null", "auc_mean": "number|null", "auc_std": "number|null"}
+"""The fields every row (model) of a test phase's summary.json has, and what each holds: the test phase's env and
+each model's name, seeds and scores, which the reports show."""
+TEST_SUMMARY_EXTRA = {"kind": "text", "learning_rate": "number", "final_iqm": "number|null",
+                      "final_iqm_low": "number|null", "final_iqm_high": "number|null", "diverged": "count",
+                      "per_seed": "numbers", "improvement": "improvement", "evolved_on": "texts",
+                      "phi_choice": "text|null"}
+"""The other fields that ``ermrl test`` writes and the readers use where a row has them, and what each holds."""
+_TOGETHER = (("final_mean", "final_std"), ("final_iqm", "final_iqm_low", "final_iqm_high"), ("auc_mean", "auc_std"))
+"""Fields that are all numbers or all null (every seed diverged) in a row."""
+
+
 def read_test_summary(out: Path) -> list[dict] | None:
+    """The rows (one per model) of the test phase in folder ``out`` (its summary.json); None when it has none.
+
+    Raises a one-line ConfigError naming the file when it is not a summary that ermrl wrote: not JSON (cut short,
+    not UTF-8), not a non-empty list of rows, or a row without a field of :data:`TEST_SUMMARY_FIELDS` or with a
+    value of the wrong type in one of those or of :data:`TEST_SUMMARY_EXTRA`."""
     path = Path(out) / "summary.json"
-    return read_json(path) if path.is_file() else None
+    if not path.is_file():
+        return None
+    problem = test_summary_problem(out)
+    if problem is not None:
+        env = Path(out).name.removeprefix("test-") if Path(out).name.startswith("test-") else None
+        raise ConfigError(f"{problem}; rerun `ermrl test{' --env ' + env if env else ''}` to write it again")
+    return read_json(path)
+
+
+def test_summary_problem(out: Path) -> str | None:
+    """Why ``out/summary.json`` is not a test phase's summary written by ermrl, as "PATH is damaged (...)"; None
+    when it is one (or when there is none)."""
+    path = Path(out) / "summary.json"
+    if not path.is_file():
+        return None
+    try:
+        rows = read_json(path)
+    except ValueError as e:  # JSONDecodeError (cut short, not JSON), UnicodeDecodeError (not text)
+        what = f"{type(e).__name__}: {(str(e).strip().splitlines() or [''])[0]}"
+    else:
+        what = _test_rows_problem(rows)
+    return None if what is None else f"{path} is damaged or was not written by `ermrl test` ({what})"
+
+
+def _test_rows_problem(rows) -> str | None:
+    if not isinstance(rows, list):
+        return f"it holds a JSON {_json_type(rows)}, not a list of models"
+    if not rows:
+        return "it lists no models"
+    for i, row in enumerate(rows, 1):
+        if not isinstance(row, dict):
+            return f"entry {i} is a JSON {_json_type(row)}, not a table of fields"
+        missing = [k for k in TEST_SUMMARY_FIELDS if k not in row]
+        if missing:
+            return f"entry {i} has no {', '.join(missing[:3])}{', ...' if len(missing) > 3 else ''}"
+        for key, kind in {**TEST_SUMMARY_FIELDS, **TEST_SUMMARY_EXTRA}.items():
+            if key in row and not _holds(row[key], kind):
+                wanted = " or ".join(_KINDS[k] for k in kind.split("|"))
+                return f"entry {i}'s {key} is {json.dumps(row[key])[:40]}, not {wanted}"
+        for keys in _TOGETHER:
+            if len({row[k] is None for k in keys if k in row}) > 1:
+                return f"entry {i}'s {', '.join(keys)} are neither all numbers nor all null"
+    return None
+
+
+_KINDS = {"text": "text", "count": "a count", "number": "a number", "null": "null", "numbers": "a list of numbers",
+          "texts": "a list of texts", "improvement": "a table of [p, low, high] values"}
+"""The kinds of :func:`_holds`, as a message names them."""
+
+
+def _holds(value, kind: str) -> bool:
+    """Whether the JSON ``value`` is of ``kind`` (:data:`_KINDS`), or of one of several ("number|null")."""
+    if "|" in kind:
+        return any(_holds(value, k) for k in kind.split("|"))
+    if kind == "null":
+        return value is None
+    if kind == "text":
+        return isinstance(value, str)
+    if kind == "count":
+        return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+    if kind == "number":
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind == "numbers":
+        return isinstance(value, list) and all(_holds(v, "number|null") for v in value)
+    if kind == "texts":
+        return isinstance(value, list) and all(isinstance(v, str) for v in value)
+    if kind == "improvement":
+        return isinstance(value, dict) and all(isinstance(v, list) and len(v) == 3
+                                               and all(_holds(x, "number") for x in v) for v in value.values())
+    raise ValueError(f"unknown kind {kind!r}")
+
+
+def _json_type(value) -> str:
+    return {dict: "object", list: "list", str: "string", bool: "boolean", type(None): "null"}.get(
+        type(value), "number")
 
 
 # -- the study record --------------------------------------------------------------------------------------

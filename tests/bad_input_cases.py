@@ -32,7 +32,13 @@ CASES = [
                                                  "PendulumNoVel-v1)"),
     ("train --backend gpu", "ermrl train: error: argument --backend: invalid choice: 'gpu' (choose from 'auto', "
                             "'jax', 'host'); see `ermrl train --help`"),
-    ("train --reservoirs -1", "ermrl train: error: reservoirs must be >= 0, got -1"),
+    ("train --reservoirs -1", "ermrl train: error: reservoirs must be in 0..100, got -1"),
+    ("train --reservoirs 100000000000000000000", "ermrl train: error: reservoirs must be in 0..100, got "
+     "100000000000000000000"),
+    ("train --n-epochs 100000000000000000000", "ermrl train: error: n_epochs must be <= 1000 (SB3's default is 10), "
+     "got 100000000000000000000"),
+    ("evolve --trials 100000000000000000000", "ermrl evolve: error: --trials must be <= 100,000 (the paper's studies "
+     "have 900), got 100000000000000000000"),
     ("train --rc-connectivity 0", "ermrl train: error: rc_connectivity must be in (0, 1], got 0.0; it is a fraction "
                                   "of the weights (ReservoirPy's default: 0.1)"),
     ("evolve --input-connectivity 1.5", "ermrl evolve: error: input_connectivity must be in (0, 1], got 1.5; it is a "
@@ -77,6 +83,30 @@ CASES = [
      "ermrl train: error: the LSTM baseline (--model lstm) runs on the JAX backend only, and LunarLander-v3 would "
      "run on the host (backend 'auto'); JAX envs: Acrobot-v1, CartPole-v1, CartPoleNoVel-v1, MountainCar-v0, "
      "MountainCarContinuous-v0, MountainCarContinuousNoVel-v0, MountainCarNoVel-v0, Pendulum-v1, PendulumNoVel-v1"),
+    ("train --out ''", "ermrl train: error: argument --out: is an empty path; give a path, or leave the option out "
+     "for its default; see `ermrl train --help`"),
+    ("train --out mine", "ermrl train: error: --out mine holds files that `ermrl train` did not write (agents) and no "
+     "config.json of its run; give a new or empty folder, or one that `ermrl train` wrote"),
+    ("train --out notes", "ermrl train: error: notes.snapshot is in the way: the run keeps its snapshot there, and it "
+     "is not one (or is damaged); move it away or give another --out"),
+    ("train --out fresh --first-seed 0 --out mine", "ermrl train: error: --out mine holds files that `ermrl train` "
+     "did not write (agents) and no config.json of its run; give a new or empty folder, or one that `ermrl train` "
+     "wrote"),
+    ("train --out phase", "ermrl train: error: --out phase holds files that `ermrl train` did not write (agents, "
+     "test_config.json) and no config.json of its run; give a new or empty folder, or one that `ermrl train` wrote"),
+    ("train --out .", "ermrl train: error: --out . holds files that `ermrl train` did not write (adir, adir.toml, "
+     "afile, ...) and no config.json of its run; give a new or empty folder, or one that `ermrl train` wrote"),
+    ("train --first-seed 100000000000000000000", "ermrl train: error: --first-seed + --seeds - 1 must be <= "
+     "2147483647 (seeds are 32-bit integers), got 100000000000000000002"),
+    ("train --first-seed 2147483647 --seeds 2", "ermrl train: error: --first-seed + --seeds - 1 must be <= 2147483647 "
+     "(seeds are 32-bit integers), got 2147483648"),
+    ("train --units 2000000", "ermrl train: error: this run needs at least MEM GiB of memory (3 agents × 1 reservoir "
+     "of 2000000 units, 1 envs × 2048 steps per rollout), more than this machine's MEM GiB; lower --units, --seeds, "
+     "--popsize, --n-envs or --n-steps"),
+    ("train --timesteps 100000000000000000000", "ermrl train: error: total timesteps must be <= 1,000,000,000 per "
+     "agent (about a day at 10k steps/s; the paper's longest run is 3M), got 100,000,000,000,000,000,000"),
+    ("train --tensorboard ''", "ermrl train: error: argument --tensorboard: is an empty path; give a path, or leave "
+     "the option out for its default; see `ermrl train --help`"),
     ("train --out afile", "ermrl train: error: --out afile is a file, not a folder; give a folder path (it is created "
                           "if missing)"),
     ("train --out afile/run", "ermrl train: error: --out afile/run: its parent afile is a file, not a folder; give a "
@@ -127,7 +157,47 @@ CASES = [
                            "generation), got 1"),
     ("evolve --popsize -3", "ermrl evolve: error: --popsize must be >= 2 (CMA-ES needs at least 2 candidates a "
                             "generation), got -3"),
-    ("evolve --sampler-seed -1", "ermrl evolve: error: --sampler-seed must be >= 0, got -1"),
+    ("evolve --sampler-seed -1", "ermrl evolve: error: --sampler-seed must be in 0..4294967295 (NumPy's seeds), got -1"),
+    ("evolve --sampler-seed 100000000000000000000",
+     "ermrl evolve: error: --sampler-seed must be in 0..4294967295 (NumPy's seeds), got 100000000000000000000"),
+    ("evolve --heartbeat-interval 10000000000000000000", "ermrl evolve: error: --heartbeat-interval and --grace-period "
+     "must be <= 86400 seconds (a day), got 10000000000000000000 and 60"),
+    ("evolve --grace-period 100000000", "ermrl evolve: error: --heartbeat-interval and --grace-period must be <= 86400 "
+     "seconds (a day), got 10 and 100000000"),
+    ("evolve --worker-index 100000000000000000000",
+     "ermrl evolve: error: --worker-index must be <= 2,147,483,647, got 100000000000000000000"),
+    ("evolve --units 200000", "ermrl evolve: error: a generation needs at least MEM GiB of memory (21 agents × 1 "
+     "reservoir of 200000 units, 1 envs × 2048 steps per rollout), more than this machine's MEM GiB; lower --units, "
+     "--seeds, --popsize, --n-envs or --n-steps"),
+    ("evolve --popsize 1000000 --units 5000", "ermrl evolve: error: a generation needs at least MEM GiB of memory "
+     "(2700 agents × 1 reservoir of 5000 units, 1 envs × 2048 steps per rollout), more than this machine's MEM GiB; "
+     "lower --units, --seeds, --popsize, --n-envs or --n-steps"),
+    ("evolve --timesteps 100000000000000000000", "ermrl evolve: error: total timesteps must be <= 1,000,000,000 per "
+     "agent (about a day at 10k steps/s; the paper's longest run is 3M), got 100,000,000,000,000,000,000"),
+    ("evolve --storage ''", "ermrl evolve: error: argument --storage: is empty; give sqlite:///PATH.db, a journal file "
+     "PATH.log or a database URL, or leave --storage out for the study's own sqlite file; see `ermrl evolve --help`"),
+    ("evolve --study ../../esc", "ermrl evolve: error: --study '../../esc' is not a plain name (it holds '/'); a "
+     "study's files go in runs/NAME, so give a name without / or \\ (e.g. cartpole-1res), and --out or --storage to "
+     "put them elsewhere"),
+    ("evolve --study /tmp/esc", "ermrl evolve: error: --study '/tmp/esc' is not a plain name (it holds '/'); a "
+     "study's files go in runs/NAME, so give a name without / or \\ (e.g. cartpole-1res), and --out or --storage to "
+     "put them elsewhere"),
+    ("evolve --study ..", "ermrl evolve: error: --study '..' is not a plain name (it is only dots); a study's files go "
+     "in runs/NAME, so give a name without / or \\ (e.g. cartpole-1res), and --out or --storage to put them "
+     "elsewhere"),
+    ("evolve --study " + "s" * 300, "ermrl evolve: error: --study is 300 characters long; give a name of at most 100"),
+    ("report --study '..\\x'", "ermrl report: error: --study '..\\\\x' is not a plain name (it holds '\\\\'); a "
+     "study's files go in runs/NAME, so give a name without / or \\ (e.g. cartpole-1res), and --out or --storage to "
+     "put them elsewhere"),
+    ("select --study a/../../b", "ermrl select: error: --study 'a/../../b' is not a plain name (it holds '/'); a "
+     "study's files go in runs/NAME, so give a name without / or \\ (e.g. cartpole-1res), and --out or --storage to "
+     "put them elsewhere"),
+    ("dashboard --study ../x", "ermrl dashboard: error: --study '../x' is not a plain name (it holds '/'); a study's "
+     "files go in runs/NAME, so give a name without / or \\ (e.g. cartpole-1res), and --out or --storage to put "
+     "them elsewhere"),
+    ("analyze hp-map ../x --out fig.png", "ermrl analyze: error: --study '../x' is not a plain name (it holds '/'); a "
+     "study's files go in runs/NAME, so give a name without / or \\ (e.g. cartpole-1res), and --out or --storage to "
+     "put them elsewhere"),
     ("evolve --seed-schedule weekly", "ermrl evolve: error: argument --seed-schedule: invalid choice: 'weekly' "
                                       "(choose from 'fixed', 'generation'); see `ermrl evolve --help`"),
     ("evolve --trials 0", "ermrl evolve: error: --trials must be >= 1, got 0"),
@@ -167,15 +237,28 @@ CASES = [
     ("evolve --storage afile", "ermrl evolve: error: cannot open storage 'afile' (Could not parse SQLAlchemy URL from "
                                "given URL string); use sqlite:///PATH.db, a journal file PATH.log, or a reachable "
                                "database URL"),
-    ("evolve --storage junk.log", "ermrl evolve: error: cannot open storage 'junk.log' (Expecting value: line 1 "
-                                  "column 1 (char 0)); use sqlite:///PATH.db, a journal file PATH.log, or a "
-                                  "reachable database URL"),
-    ("select --study s --storage junk.log", "ermrl select: error: cannot open storage 'junk.log' (Expecting value: "
-                                            "line 1 column 1 (char 0)); use sqlite:///PATH.db, a journal file "
-                                            "PATH.log, or a reachable database URL"),
+    ("evolve --storage notes.log", "ermrl evolve: error: cannot open storage 'notes.log' (notes.log is not an Optuna "
+     "journal: its first line is no journal record); use sqlite:///PATH.db, a journal file PATH.log, or a reachable "
+     "database URL"),
+    ("evolve --storage sqlite:///tiny.db", "ermrl evolve: error: cannot open storage 'sqlite:///tiny.db' (tiny.db is "
+     "not a SQLite database); use sqlite:///PATH.db, a journal file PATH.log, or a reachable database URL"),
+    ("evolve --storage junk.log", "ermrl evolve: error: cannot open storage 'junk.log' (junk.log is not an Optuna "
+     "journal: its first line is no journal record); use sqlite:///PATH.db, a journal file PATH.log, or a reachable "
+     "database URL"),
+    ("select --study s --storage junk.log", "ermrl select: error: cannot open storage 'junk.log' (junk.log is not an Optuna "
+     "journal: its first line is no journal record); use sqlite:///PATH.db, a journal file PATH.log, or a reachable "
+     "database URL"),
     (f"evolve --study one --storage {SQLITE} --units 50",
-     "ermrl evolve: error: study 'one' already exists with another config; rerun with the same flags to resume it, "
-     "or pick a new --study name"),
+     "ermrl evolve: error: study 'one' already exists with another config (popsize: 6 in the study, 7 here; "
+     "search_space.iss: {\"fixed\": 1.0} in the study, [0.1, 10.0] here; seeds: 1 in the study, 3 here; ...); rerun "
+     "with the same flags to resume it, or pick a new --study name"),
+    (f"evolve --study one --storage {SQLITE} --units 50 --popsize 6 --seeds 1 --fixed-iss 1 --timesteps 2048",
+     "ermrl evolve: error: study 'one' already exists with another config (train.agent.spec.units: 100 in the "
+     "study, 50 here); rerun with the same flags to resume it, or pick a new --study name"),
+    (f"evolve --study one --storage {SQLITE} --env CartPoleNoVel-v1 --env Pendulum-v1 --popsize 6 --seeds 1 "
+     "--fixed-iss 1 --timesteps 2048", "ermrl evolve: error: study 'one' already exists with another config (envs: "
+     "[\"CartPoleNoVel-v1\"] in the study, [\"CartPoleNoVel-v1\", \"Pendulum-v1\"] here); rerun with the same flags "
+     "to resume it, or pick a new --study name"),
     # -- select, test, report: missing studies and their numbers -------------------------------------------
     ("select", "ermrl select: error: the following arguments are required: --study; see `ermrl select --help`"),
     ("select --study nope", "ermrl select: error: no study 'nope': runs/nope/study.db does not exist; run `ermrl "
@@ -190,9 +273,19 @@ CASES = [
                                                        "and 5"),
     ("select --study s --storage missing.log", "ermrl select: error: no study 's': missing.log does not exist; run "
                                                "`ermrl evolve` first or pass --storage/--out"),
-    ("test --study s --seeds 0", "ermrl test: error: --seeds must be >= 1, got 0"),
+    ("test --study s --seeds 0", "ermrl test: error: --seeds must be in 1..10,000 (the paper tests on 10), got 0"),
     ("test --study s --ermrl-lr 2", "ermrl test: error: learning rate 2.0 is outside (0, 1); the paper uses 3e-4 or "
                                     "1e-4"),
+    ("test --study one --storage sqlite:///studies.db --seeds 1000000", "ermrl test: error: --seeds must be in "
+     "1..10,000 (the paper tests on 10), got 1000000"),
+    ("test --study one --storage sqlite:///studies.db --timesteps 100000000000000000000", "ermrl test: error: total "
+     "timesteps must be <= 1,000,000,000 per agent (about a day at 10k steps/s; the paper's longest run is 3M), got "
+     "100,000,000,000,000,000,000"),
+    ("select --study one --storage sqlite:///studies.db --seeds 100000000", "ermrl select: error: the selection needs "
+     "at least MEM GiB of memory (100000000 agents × 1 reservoir of 100 units, 1 envs × 2048 steps per rollout), more "
+     "than this machine's MEM GiB; lower --units, --seeds, --popsize, --n-envs or --n-steps"),
+    ("test --study one --storage sqlite:///studies.db --out .", "ermrl test: error: test.partial holds files that "
+     "ermrl did not write there (notes.txt); move them away, then rerun"),
     ("test --study s --trial -1", "ermrl test: error: --trial must be a trial number >= 0, got -1"),
     ("test --study s --auc-steps 0", "ermrl test: error: --auc-steps must be >= 1, got 0"),
     ("test --study s --agents-per-run 0", "ermrl test: error: --agents-per-run must be >= 1, got 0"),
@@ -256,7 +349,16 @@ CASES = [
     ("analyze probe --env Nope-v1 --out fig.png", "ermrl analyze: error: unknown env id 'Nope-v1': Gymnasium has no "
                                                   "'Nope-v1'; did you mean Hopper-v5, Hopper-v4, Hopper-v3?"),
     ("analyze probe --env CartPoleNoVel-v1 --phi nan 0.5 1 --out fig.png",
-     "ermrl analyze: error: --phi nan 0.5 1: SR and ISS must be positive and finite and LR (the leak rate) in (0, 1]"),
+     "ermrl analyze: error: --phi nan 0.5 1: SR and ISS must be in (0, 1e+06] and LR (the leak rate) in (0, 1]"),
+    ("analyze probe --env CartPoleNoVel-v1 --phi 1e300 0.5 1 --out fig.png",
+     "ermrl analyze: error: --phi 1e+300 0.5 1: SR and ISS must be in (0, 1e+06] and LR (the leak rate) in (0, 1]"),
+    ("analyze probe --env CartPoleNoVel-v1 --units 100000000000000000000 --out fig.png",
+     "ermrl analyze: error: --units must be <= 10,000, got 100000000000000000000"),
+    ("baselines --env CartPole-v1 --seeds 100000000000000000000", "ermrl baselines: error: the PPO baseline needs at "
+     "least MEM GiB of memory (100000000000000000000 agents, 1 envs × 2048 steps per rollout), more than this "
+     "machine's MEM GiB; lower --units, --seeds, --popsize, --n-envs or --n-steps"),
+    ("baselines --env CartPole-v1 --random-episodes 100000000000000000000", "ermrl baselines: error: "
+     "--random-episodes must be <= 1,000,000, got 100000000000000000000"),
     ("analyze probe --env CartPoleNoVel-v1 --phi 1 0.5 --out fig.png",
      "ermrl analyze: error: argument --phi: expected 3 arguments; see `ermrl analyze probe --help`"),
     (f"analyze probe --env CartPoleNoVel-v1 --study one --storage {SQLITE} --units 50 --out fig.png",
@@ -288,8 +390,16 @@ CASES = [
     ("video afile", "ermrl video: error: afile is a file, not a run folder; give the folder, or the agent file as "
                     "--agent afile"),
     ("video --agent badagent.npz --episodes 0", "ermrl video: error: --episodes must be >= 1, got 0"),
-    ("video --agent badagent.npz --fps 0", "ermrl video: error: --fps must be a positive number, got 0.0; or leave "
-                                           "it out for the env's rate"),
+    ("video --agent badagent.npz --fps 0", "ermrl video: error: --fps must be between 0.1 and 1000 frames per "
+                                           "second, got 0; or leave it out for the env's rate"),
+    ("video --agent badagent.npz --fps 1e-300", "ermrl video: error: --fps must be between 0.1 and 1000 frames per "
+                                                "second, got 1e-300; or leave it out for the env's rate"),
+    ("video --agent badagent.npz --fps 1e300", "ermrl video: error: --fps must be between 0.1 and 1000 frames per "
+                                               "second, got 1e+300; or leave it out for the env's rate"),
+    ("video --agent badagent.npz --episodes 1000000", "ermrl video: error: --episodes must be <= 100 (their frames "
+                                                      "are held until the file is written), got 1000000"),
+    ("video --agent ''", "ermrl video: error: argument --agent: is an empty path; give a path, or leave the option "
+                         "out for its default; see `ermrl video --help`"),
     ("video --agent badagent.npz --out clip.avi", "ermrl video: error: video file clip.avi must end in .mp4 or .gif"),
     ("dashboard --study nope", "ermrl dashboard: error: no study 'nope': runs/nope/study.db does not exist; run "
                                "`ermrl evolve` first or pass --storage/--out"),

@@ -6,6 +6,7 @@ output that cannot be written is refused before any work. The
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -15,6 +16,7 @@ import optuna
 import pytest
 
 from ermrl import storage
+from ermrl.agent_files import AGENT_FILES
 from ermrl.errors import ConfigError
 
 from cli_runs import ermrl
@@ -40,17 +42,20 @@ def test_a_staged_folder_appears_whole_or_not_at_all(tmp_path):
 def test_a_staged_folder_over_an_old_one_replaces_its_files_and_keeps_other_outputs(tmp_path):
     out = tmp_path / "run"
     for name, text in (("curves.csv", "old"), ("summary.json", "old"), ("agents/seed0.npz", "old"),
-                       ("agents/seed9.npz", "old"), ("context.png", "analysis")):
+                       ("agents/seed9.npz", "old"), ("agents/PPO/seed3-1.npz", "old"), ("context.png", "analysis"),
+                       ("agents/README.md", "mine"), ("agents/mine/policy.pt", "mine"), ("agents/seedling.npz", "mine")):
         storage.write_text(out / name, text)
-    with pytest.raises(RuntimeError), storage.staged_folder(out) as stage:
+    with pytest.raises(RuntimeError), storage.staged_folder(out, stale=AGENT_FILES) as stage:
         storage.write_text(stage / "curves.csv", "new")
         raise RuntimeError("crash while writing")
     assert (out / "curves.csv").read_text() == "old" and (out / "summary.json").read_text() == "old"
-    with storage.staged_folder(out) as stage:
+    with storage.staged_folder(out, stale=AGENT_FILES) as stage:
         for name in ("curves.csv", "summary.json", "agents/seed0.npz"):
             storage.write_text(stage / name, "new")
     files = {str(p.relative_to(out)): p.read_text() for p in out.rglob("*") if p.is_file()}
-    assert files == {"curves.csv": "new", "summary.json": "new", "agents/seed0.npz": "new", "context.png": "analysis"}
+    # the old agents go (ermrl wrote them); whatever else is there stays, agents/ included
+    assert files == {"curves.csv": "new", "summary.json": "new", "agents/seed0.npz": "new", "context.png": "analysis",
+                     "agents/README.md": "mine", "agents/mine/policy.pt": "mine", "agents/seedling.npz": "mine"}
 
 
 def test_a_killed_writers_staging_folder_is_removed_by_the_next_writer(tmp_path):
@@ -137,3 +142,33 @@ def test_an_unwritable_output_is_refused_before_any_work(argv, flag, path, tmp_p
                r"\((no such file or directory|permission denied)\); give a folder you can write\n")  # mkdir's reason
     assert r.returncode == 2 and re.fullmatch(message, r.stderr), r.stderr
     assert sorted(p.name for p in tmp_path.rglob("*")) == before
+
+
+@pytest.fixture
+def read_only_mount(tmp_path):
+    """A tmpfs at tmp_path/ro, for the test to fill, then remounted read-only by calling the fixture's value;
+    skipped where this process may not mount (not root, or no CAP_SYS_ADMIN)."""
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=8m", "tmpfs", str(ro)], capture_output=True).returncode:
+        pytest.skip("cannot mount a tmpfs here")
+    yield ro, lambda: subprocess.run(["mount", "-o", "remount,ro", str(ro)], check=True)
+    subprocess.run(["umount", "-l", str(ro)])
+
+
+def test_a_read_only_storage_is_named_before_any_work(read_only_mount, tmp_path):
+    """A study on a read-only file system, resumed or selected with its results going elsewhere (--out): one line
+    naming the storage and the reason, exit 2, before any training (before: the error came after training, and
+    said to free some space)."""
+    ro, remount = read_only_mount
+    tiny = ["--env", "CartPole-v1", "--seeds", "1", "--timesteps", "512", "--units", "10", "--popsize", "2",
+            "--no-estimate", "--quiet"]
+    made = f"sqlite:///{tmp_path / 'study.db'}"
+    assert ermrl("evolve", *tiny, "--trials", "2", "--study", "k", "--storage", made, cwd=tmp_path).returncode == 0
+    shutil.copy(tmp_path / "study.db", ro / "study.db")  # a copy: this process holds the first one open
+    remount()
+    url = f"sqlite:///{ro / 'study.db'}"
+    for argv in (["evolve", *tiny, "--trials", "4", *HUGE], ["select", "--top", "1", "--seeds", "1"]):
+        r = ermrl(*argv, "--study", "k", "--storage", url, "--out", "elsewhere", cwd=tmp_path)
+        assert (r.returncode, r.stderr) == (2, f"ermrl {argv[0]}: error: cannot write storage '{url}' ({ro}: "
+                                               "read-only file system); give a storage you can write\n")

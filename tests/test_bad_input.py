@@ -12,6 +12,7 @@ at import (ERMRL_CPU_DEVICES) and ``--debug``. The matrix of cases is in bad_inp
 from __future__ import annotations
 
 import os
+import re
 import shutil
 from pathlib import Path
 
@@ -52,6 +53,17 @@ def _template(folder: Path) -> None:
     (folder / "adir.toml").mkdir()
     np.savez(folder / "badagent.npz", weights=np.zeros(3))
     (folder / "junk.log").write_text("a log, not Optuna's\nsecond line\n")
+    (folder / "notes.log").write_text("one line of notes, which Optuna would take for a torn record\n")
+    (folder / "tiny.db").write_bytes(b"x")  # no SQLite database: SQLite would overwrite it
+    (folder / "mine" / "agents" / "mine").mkdir(parents=True)  # a user's folder: `train --out` must not touch it
+    (folder / "mine" / "agents" / "README.md").write_text("my notes\n")
+    (folder / "mine" / "agents" / "mine" / "policy.pt").write_bytes(b"weights")
+    (folder / "phase" / "agents" / "PPO").mkdir(parents=True)  # a test phase is no train run
+    (folder / "phase" / "test_config.json").write_text("{}\n")
+    (folder / "phase" / "agents" / "PPO" / "seed1000.npz").write_bytes(b"agent")
+    (folder / "notes.snapshot").write_text("a user's file where `train --out notes` would keep its snapshot\n")
+    (folder / "test.partial").mkdir()  # where the test phase of a study in this folder keeps its finished models
+    (folder / "test.partial" / "notes.txt").write_text("a user's file\n")
 
     url = f"sqlite:///{folder / 'studies.db'}"
     space = SearchSpace(1, fixed_iss=1.0)
@@ -122,7 +134,7 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(work, capsys, compiles,
 
     before = snapshot(work)
     code, out, err = run_in_process(shlex.split(command), capsys)
-    assert (code, err) == (2, message + "\n")
+    assert (code, re.sub(r"\d[\d,]* GiB", "MEM GiB", err)) == (2, message + "\n")  # MEM: this machine's figures
     assert out == ""
     assert snapshot(work) == before
     assert compiles == []

@@ -252,7 +252,9 @@ def test_a_finished_test_phase_is_kept_across_new_test_config_fields(tmp_path):
     saved = {k: v for k, v in dataclasses.asdict(test).items() if k != "recurrent_baseline"}
     (tmp_path / "test_config.json").write_text(json.dumps({**saved, "ermrl_lrs": [3e-4, 1e-4], "phi_trial": 7}))
     assert not runner._test_done(tmp_path, test, 7)  # no summary yet: not finished
-    (tmp_path / "summary.json").write_text("[]")
+    row = {"model": "m", "env_id": "Ant-v5", "n_seeds": 3, "final_mean": 1.0, "final_std": 0.0, "auc_mean": 1.0,
+           "auc_std": 0.0}
+    (tmp_path / "summary.json").write_text(json.dumps([row]))
     assert runner._test_done(tmp_path, test, 7)
     assert not runner._test_done(tmp_path, test, 8)
     assert not runner._test_done(tmp_path, dataclasses.replace(test, seeds=4), 7)

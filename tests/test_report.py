@@ -87,10 +87,10 @@ def test_report_test_phase(tmp_path):
     study = make_study(1, n_complete=10, n_failed=0)
     (tmp_path / "test").mkdir()
     tiny_png(tmp_path / "test" / "test_phase.png")
-    rows = [{"model": "evolved ER-MRL", "final_mean": 451.5, "final_std": 12.25, "auc_mean": 301.75,
-             "auc_std": 8.5, "n_seeds": 5},
-            {"model": "PPO baseline", "final_mean": 210.125, "final_std": 30.0, "auc_mean": 150.0,
-             "auc_std": 9.0, "n_seeds": 5}]
+    rows = [{"model": "evolved ER-MRL", "env_id": "CartPole-v1", "final_mean": 451.5, "final_std": 12.25,
+             "auc_mean": 301.75, "auc_std": 8.5, "n_seeds": 5},
+            {"model": "PPO baseline", "env_id": "CartPole-v1", "final_mean": 210.125, "final_std": 30.0,
+             "auc_mean": 150.0, "auc_std": 9.0, "n_seeds": 5}]
     (tmp_path / "test" / "summary.json").write_text(json.dumps(rows))
     out = write_report(study, tmp_path, out=tmp_path / "sub" / "r.html")
     assert out == tmp_path / "sub" / "r.html" and not (tmp_path / "report.html").exists()
@@ -106,7 +106,7 @@ def test_report_test_phase_from_curves_csv(tmp_path):
     study = make_study(1, n_complete=5, n_failed=0)
     (tmp_path / "test").mkdir()
     (tmp_path / "test" / "summary.json").write_text(json.dumps(
-        [{"model": "m", "final_mean": 1.0, "final_std": 0.0, "auc_mean": 1.0, "auc_std": 0.0, "n_seeds": 2}]))
+        [{"model": "m", "env_id": "CartPole-v1", "final_mean": 1.0, "final_std": 0.0, "auc_mean": 1.0, "auc_std": 0.0, "n_seeds": 2}]))
     lines = ["model,seed,timestep,mean_return_100"] + [f"m,{s},{t},{t + s}" for s in (0, 1) for t in (100, 200)]
     (tmp_path / "test" / "curves.csv").write_text("\n".join(lines) + "\n")
     doc = write_report(study, tmp_path).read_text()

@@ -24,7 +24,7 @@ from ermrl.evolution.generations import FULL, Ledger
 from ermrl.evolution.heartbeat import WORKER_ATTR
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
-from ermrl.evolution.workers import WorkerConfig, worker_seed
+from ermrl.evolution.workers import Worker, WorkerConfig, worker_seed
 from ermrl.storage import encode_study_record
 from ermrl.training import TrainConfig
 
@@ -383,3 +383,28 @@ def test_database_passwords_are_never_printed(postgres_url, tmp_path):
     assert r3.returncode == 2 and r3.stderr.startswith(
         "ermrl report: error: cannot open storage 'postgresql://ermrl:***@127.0.0.1:1/db' (")
     assert not any("s3cret" in s for s in (r.stdout, r.stderr, r2.stdout, r2.stderr, r3.stdout, r3.stderr))
+
+
+def test_two_workers_with_one_index_are_warned_on_stderr(tmp_path, capsys):
+    """A live worker (here: this process under another token) runs a trial with --worker-index 0, and a second one
+    starts with the same index: the warning goes to stderr, where warnings belong, not into the results on stdout."""
+    import time
+
+    from ermrl.evolution.heartbeat import HEARTBEAT_ATTR, WorkerId
+
+    config = tiny(trials=4)
+    url = f"journal:{tmp_path / 'studies.log'}"
+    study = open_study(url, "twin", make_sampler("cmaes", 4, 0), encode_study_record(config))
+    twin = study.ask()
+    twin.set_user_attr("generation", 0)
+    twin.set_user_attr(WORKER_ATTR, WorkerId.here(0).record())
+    study._storage.set_trial_system_attr(twin._trial_id, HEARTBEAT_ATTR, time.time() + 3600)  # alive for the run
+    config.space.suggest(twin)
+    lines = []
+    worker = Worker(study, config, WorkerConfig(batch=2), log=lines.append)
+    worker._trials()  # what a worker looks at before each claim
+    worker._trials()  # once is enough
+    out, err = capsys.readouterr()
+    warning = (f"warning: another worker (pid {os.getpid()} on {WorkerId.here(0).host}) also runs with "
+               "--worker-index 0; give each worker its own index, or their sampler draws repeat")
+    assert err.count(warning) == 1 and warning not in out and not any("worker-index" in line for line in lines)

@@ -12,7 +12,8 @@ from ermrl import storage
 from ermrl.analysis import statistics
 from ermrl.analysis.html import img, page, table
 from ermrl.analysis.hp_map import LEAK_RATE_HEADER, draw_hp_map, hp_map_points, leak_rate_rows
-from ermrl.analysis.report import ranked, test_dirs, test_phase_section
+from ermrl.analysis.report import ranked, skipped_note, test_dirs, test_phase_sections
+from ermrl.errors import ConfigError
 
 def normalized_test_scores(rows_by_env: dict[str, list[dict]], random_returns: dict[str, float]) -> dict[str, np.ndarray]:
     """{model kind: (n_seeds, n_envs)} final scores normalized per env as (score − random) / (PPO − random),
@@ -26,10 +27,10 @@ def normalized_test_scores(rows_by_env: dict[str, list[dict]], random_returns: d
         if ppo["final_mean"] == rnd:
             continue
         for r in rows:
-            if r["model"] == "PPO (full observation)":
+            if r["model"] == "PPO (full observation)" or "per_seed" not in r:  # per_seed: storage.TEST_SUMMARY_EXTRA
                 continue
             x = np.array([np.nan if v is None else v for v in r["per_seed"]], float)
-            kind = "PPO" if r["kind"] == "PPO" else r["model"].split(" (")[0]
+            kind = "PPO" if r.get("kind") == "PPO" else r["model"].split(" (")[0]
             kinds.setdefault(kind, []).append((x - rnd) / (ppo["final_mean"] - rnd))
     n = min((len(v) for v in kinds.values()), default=0)
     return {k: np.stack(v, axis=1) for k, v in kinds.items() if len(v) == n and n > 0}
@@ -47,6 +48,7 @@ def write_experiment_report(experiment, scale, plans, storage_url: str, folder: 
              f"{html.escape(experiment.paper)}; claims {', '.join(experiment.claims)}. Scale: "
              f"{html.escape(scale.description)}. Storage: <code>{html.escape(storage_url)}</code></p>"]
     studies, rows_by_env, summary = [], {}, []
+    skipped: dict[Path, str] = {}  # damaged test phases, left out
     for p in plans:
         try:
             study = load_study(storage_url, p.study)
@@ -58,7 +60,10 @@ def write_experiment_report(experiment, scale, plans, storage_url: str, folder: 
         summary.append([p.spec.name, ", ".join(p.config.env_ids), p.spec.reservoirs, p.spec.units,
                         len(ranked(study)), best[0].value if best else None, sel.get("winner")])
         for d in test_dirs(p.run_dir):
-            rows = storage.read_test_summary(d)
+            try:
+                rows = storage.read_test_summary(d)
+            except ConfigError:
+                continue  # told of with its section's below
             rows_by_env.setdefault(rows[0]["env_id"], rows) if rows else None
     parts += ["<h2>Studies</h2>", table(["study", "evolved on", "K", "units", "completed trials", "best fitness",
                                          "Φ* (selected trial)"], summary)]
@@ -77,10 +82,12 @@ def write_experiment_report(experiment, scale, plans, storage_url: str, folder: 
                   img(draw_hp_map(series, folder / "hp_map_across_studies.png"), "HP map"),
                   table(LEAK_RATE_HEADER, leak_rate_rows(series))]
     for p in plans:
-        sections = [s for d in test_dirs(p.run_dir) for s in test_phase_section(d, p.run_dir)]
+        sections = test_phase_sections(p.run_dir, skipped)
         if sections:
             parts += [f"<h2>{html.escape(p.spec.name)}</h2>",
                       f'<p><a href="{html.escape(p.spec.name)}/report.html">study report</a></p>', *sections]
+    if skipped:
+        parts += ["<h2>Skipped test phases</h2>", *skipped_note(skipped)]
     out = folder / "report.html"
     storage.write_text(out, page(title, parts))
     return out

@@ -10,6 +10,7 @@ from __future__ import annotations
 import html
 import math
 import os
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -29,6 +30,7 @@ from ermrl.analysis.html import page
 from ermrl.analysis.html import table as _table
 from ermrl.analysis.plots import learning_curves
 from ermrl.analysis.statistics import format_ci
+from ermrl.errors import ConfigError
 
 MARKERS = ("o", "^", "s", "D", "v", "P", "*", "X")
 
@@ -214,6 +216,29 @@ def test_phase_section(test_dir: Path, run_dir: Path) -> list[str]:
     return parts
 
 
+def test_phase_sections(run_dir: Path, skipped: dict[Path, str] | None = None) -> list[str]:
+    """HTML of every test phase of ``run_dir`` (:func:`test_phase_section`), a damaged one (its summary.json or
+    curves.csv not what ermrl wrote) left out: it is added to ``skipped`` ({folder: the one-line reason}) and
+    :func:`skipped_note` tells of it, so that one damaged file does not cost the whole report."""
+    parts = []
+    for d in test_dirs(run_dir):
+        try:
+            parts += test_phase_section(d, run_dir)
+        except ConfigError as e:
+            if skipped is not None:
+                skipped[d] = str(e)
+    return parts
+
+
+def skipped_note(skipped: dict[Path, str]) -> list[str]:
+    """A paragraph per damaged test phase left out of a report, each also warned of on stderr (one line)."""
+    parts = []
+    for d, reason in skipped.items():
+        print(f"warning: skipped test phase {d}: {reason}", file=sys.stderr)
+        parts.append(f'<p class="warn">skipped test phase {html.escape(str(d))}: {html.escape(reason)}</p>')
+    return parts
+
+
 def _pm(mean, std) -> str:
     return "—" if mean is None else f"{mean:.6g} ± {std:.6g}"
 
@@ -290,11 +315,9 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
                   _table(["trial", "evolution fitness", "fresh-seed fitness"],
                          [[n, a, b] for n, a, b in zip(selection["trials"], selection["evolution_values"],
                                                        selection["values"])])]
-    tests = test_dirs(run_dir)
-    if tests:
-        parts.append("<h2>Test phases</h2>")
-        for d in tests:
-            parts += test_phase_section(d, run_dir)
+    if test_dirs(run_dir):
+        skipped: dict[Path, str] = {}
+        parts += ["<h2>Test phases</h2>", *test_phase_sections(run_dir, skipped), *skipped_note(skipped)]
     parts += analysis_section(run_dir, out.parent)
 
     parts += ["<h2>Fitness over trials</h2>",

@@ -6,12 +6,14 @@ from __future__ import annotations
 import argparse
 import errno
 import os
+import signal
 import sys
+import threading
 import traceback
 from typing import NoReturn
 
 import ermrl
-from ermrl.errors import TERMINATED, ConfigError, RunFailed
+from ermrl.errors import TERMINATED, ConfigError, RunFailed, raise_terminated
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -108,6 +110,28 @@ def _write_refused(e: BaseException | None) -> str | None:
     return None
 
 
+def _damaged_storage(e: BaseException, args: argparse.Namespace | None) -> str | None:
+    """The one-line error when ``e`` or an exception behind it is SQLite's "database disk image is malformed" or
+    "file is not a database" (a study.db with a damaged page, found by a query after it opened), naming the
+    command's storage (--storage, else the study's study.db); None for anything else."""
+    from ermrl.evolution.study import damaged_database, damaged_storage_message
+
+    reason = damaged_database(e)
+    if reason is None:
+        return None
+    url = getattr(args, "storage", None)
+    if url is None and getattr(args, "study", None) is not None:
+        from ermrl.cli.common import storage_url
+
+        try:
+            url = storage_url(argparse.Namespace(study=args.study, storage=None, out=getattr(args, "out", None)))
+        except Exception:  # not a study command after all
+            url = None
+    if url is None:
+        return f"the study's storage is damaged ({reason}); restore it from a copy, or start a new study"
+    return damaged_storage_message(url, reason)
+
+
 def _leave(code: int, why: str) -> NoReturn:
     """Ends the process at once after Ctrl-C or SIGTERM, once a worker gave its trials back: XLA's threads may
     still be running a computation, and the interpreter's teardown races them (seen as "pure virtual method called",
@@ -119,6 +143,20 @@ def _leave(code: int, why: str) -> NoReturn:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Runs the command ``argv`` (default: the process's arguments) and returns its exit status. While it runs,
+    SIGTERM (where nothing else handles it) stops it as Ctrl-C does: what it had half-written is removed, and it
+    ends with one line and exit status 143."""
+    own = threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+    if own:
+        signal.signal(signal.SIGTERM, raise_terminated)
+    try:
+        return _run(argv)
+    finally:
+        if own:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _run(argv: list[str] | None) -> int:
     from ermrl.cli import analyze, commands, dashboard, experiment, video
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -155,9 +193,14 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as e:  # a bug, or the system failing (disk full, ...): one line unless --debug
         if debug:
             traceback.print_exc()
+        if (message := _damaged_storage(e, locals().get("args"))) is not None:  # bad input: a damaged study.db
+            print(f"{command}: error: {message}", file=sys.stderr)
+            return 2
         if (reason := _write_refused(e)) is not None:
-            print(f"{command}: error: {reason}; free some space or give another output path, then rerun "
-                  "(files are written whole or not at all, and a study keeps every trial told before)", file=sys.stderr)
+            fix = "give a path you can write" if "read" in reason.lower() else \
+                "free some space or give another output path"
+            print(f"{command}: error: {reason}; {fix}, then rerun (files are written whole or not at all, and a "
+                  "study keeps every trial told before)", file=sys.stderr)
             return 1
         first = str(e).strip().splitlines()[0] if str(e).strip() else ""
         print(f"{command}: error: unexpected {type(e).__name__}{': ' + first if first else ''} "

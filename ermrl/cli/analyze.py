@@ -29,11 +29,11 @@ def add_parser(sub, formatter) -> None:
                                      "Mann–Whitney test of its leak rates against the other studies' of the same K) "
                                      "to a .md beside it, also printed.", formatter_class=formatter)
     hp.add_argument("studies", nargs="+", metavar="STUDY", help="study names, as given to or printed by `ermrl evolve`")
-    hp.add_argument("--storage", default=None,
+    hp.add_argument("--storage", type=options.storage, default=None,
                     help="Optuna storage URL or journal file holding every study (default: each study's sqlite in "
                          "runs/STUDY)")
     hp.add_argument("--top", type=int, default=30, help="best completed trials drawn per study")
-    hp.add_argument("--out", type=Path, required=True, metavar="FIG.png",
+    hp.add_argument("--out", type=options.path, required=True, metavar="FIG.png",
                     help="figure path (.png, .svg or .pdf); FIG.csv beside it holds the points drawn, FIG.md "
                          "the leak-rate table")
     options.add_config_option(hp)
@@ -50,12 +50,12 @@ def add_parser(sub, formatter) -> None:
                     help="a 1-reservoir Φ to probe (repeatable)")
     pr.add_argument("--study", action="append", default=[], metavar="NAME",
                     help="probe this study's Φ* (the selected trial, else the best; repeatable)")
-    pr.add_argument("--storage", default=None, help="Optuna storage URL or journal file of the studies "
+    pr.add_argument("--storage", type=options.storage, default=None, help="Optuna storage URL or journal file of the studies "
                                                     "(default: each study's sqlite in runs/STUDY)")
     pr.add_argument("--units", type=int, default=100, help="units per reservoir")
     pr.add_argument("--episodes", type=int, default=300, help="random-policy episodes (a quarter held out)")
     pr.add_argument("--seed", type=int, default=0, help="seeds the episodes and the reservoir draw")
-    pr.add_argument("--out", type=Path, required=True, metavar="FIG.png",
+    pr.add_argument("--out", type=options.path, required=True, metavar="FIG.png",
                     help="figure path; FIG.md beside it holds the R² table")
     options.add_config_option(pr)
 
@@ -63,8 +63,8 @@ def add_parser(sub, formatter) -> None:
                          description="Run one deterministic episode of a saved ER-MRL agent and plot the observation "
                                      "traces above the first --units reservoir units (paper appendix, Fig. "
                                      "context-observation).", formatter_class=formatter)
-    cx.add_argument("source", type=Path, metavar="RUN", help="a run folder (its first saved agent) or an agent file")
-    cx.add_argument("--out", type=Path, default=None, metavar="FIG.png", help="figure (default RUN/context.png)")
+    cx.add_argument("source", type=options.path, metavar="RUN", help="a run folder (its first saved agent) or an agent file")
+    cx.add_argument("--out", type=options.path, default=None, metavar="FIG.png", help="figure (default RUN/context.png)")
     cx.add_argument("--units", type=int, default=20, help="reservoir units plotted")
     _episode_options(cx)
 
@@ -75,8 +75,8 @@ def add_parser(sub, formatter) -> None:
                                      "policy input (the context; for PPO the observation). Prints a table, writes it "
                                      "beside the spectra figure (paper appendix, the CPG argument).",
                          formatter_class=formatter)
-    ff.add_argument("sources", nargs="+", type=Path, metavar="RUN", help="run folders or agents/ folders or agent files")
-    ff.add_argument("--out", type=Path, required=True, metavar="FIG.png",
+    ff.add_argument("sources", nargs="+", type=options.path, metavar="RUN", help="run folders or agents/ folders or agent files")
+    ff.add_argument("--out", type=options.path, required=True, metavar="FIG.png",
                     help="spectra figure; FIG.md (table) and FIG.json (per agent) beside it")
     _episode_options(ff)
 
@@ -88,10 +88,10 @@ def add_parser(sub, formatter) -> None:
                                      "evaluation and the training score (final: the last 10 training episodes, the "
                                      "paper's fitness) over its agents, mean ± std and IQM [95%% CI], and their "
                                      "paired difference.", formatter_class=formatter)
-    ev.add_argument("sources", nargs="+", type=Path, metavar="RUN", help="run folders, agents/ folders or agent files")
+    ev.add_argument("sources", nargs="+", type=options.path, metavar="RUN", help="run folders, agents/ folders or agent files")
     ev.add_argument("--episodes", type=int, default=10, help="evaluation episodes per agent")
     ev.add_argument("--stochastic", action="store_true", help="draw actions from the policy instead of its mode")
-    ev.add_argument("--out", type=Path, default=None, metavar="TABLE.md",
+    ev.add_argument("--out", type=options.path, default=None, metavar="TABLE.md",
                     help="write the table here, and every agent's returns to TABLE.json beside it")
     _episode_options(ev)
 
@@ -108,17 +108,31 @@ def run_command(args) -> int:
             "evaluate": cmd_evaluate}[args.analyze_command](args)
 
 
+MAX_SEED = 2**31 - 1
+MAX_COUNT = 100_000
+"""The most episodes an analysis runs."""
+MAX_UNITS = 10_000
+"""The largest reservoir a probe draws (its (units, units) weights: 400 MB)."""
+MAX_SCALE = 1e6
+"""The largest spectral radius or input scaling a probe takes (float32 weights stay finite)."""
+
+
 def _check_numbers(args) -> None:
     """One-line errors for the analyses' counts, seeds and Φ values, before any file is read."""
     if getattr(args, "seed", 0) < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
+    if getattr(args, "seed", 0) > MAX_SEED:
+        raise ConfigError(f"--seed must be <= {MAX_SEED}, got {args.seed}")
     for flag in ("max_steps", "units", "episodes"):
         value = getattr(args, flag, None)
         if value is not None and value < 1:
             raise ConfigError(f"--{flag.replace('_', '-')} must be >= 1, got {value}")
+        most = {"units": MAX_UNITS, "episodes": MAX_COUNT}.get(flag)
+        if most is not None and value is not None and value > most:
+            raise ConfigError(f"--{flag} must be <= {most:,}, got {value}")
     for sr, lr, iss in getattr(args, "phi", ()):
-        if not all(math.isfinite(v) and v > 0 for v in (sr, lr, iss)) or lr > 1:
-            raise ConfigError(f"--phi {sr:g} {lr:g} {iss:g}: SR and ISS must be positive and finite and LR (the "
+        if not all(math.isfinite(v) and 0 < v <= MAX_SCALE for v in (sr, lr, iss)) or lr > 1:
+            raise ConfigError(f"--phi {sr:g} {lr:g} {iss:g}: SR and ISS must be in (0, {MAX_SCALE:g}] and LR (the "
                               "leak rate) in (0, 1]")
 
 
@@ -215,11 +229,22 @@ def _agents(source: Path) -> list[Path]:
     return found
 
 
+def _check_renderer(agents: list[Path]) -> None:
+    """A MUJOCO_GL that MuJoCo refuses, named before the agents' MuJoCo envs are made (an import error then)."""
+    from ermrl import agent_files
+    from ermrl.envs import masking
+    from ermrl.envs.host_backend import check_mujoco_gl
+
+    for path in agents:
+        check_mujoco_gl(masking.parse(agent_files.read_agent(path)[0]["env_id"])[0])
+
+
 def cmd_context(args) -> int:
     from ermrl import storage
     from ermrl.analysis.context import context_figure
 
     agents = _agents(args.source)
+    _check_renderer(agents[:1])
     out = storage.check_file(args.out or (args.source if args.source.is_dir() else args.source.parent) / "context.png")
     path = context_figure(agents[0], out, args.seed, args.units, args.max_steps)
     print(f"wrote {path} ({agents[0]})")
@@ -234,6 +259,7 @@ def cmd_fft(args) -> int:
         raise ConfigError(f"--out {args.out} is a folder; give a figure path such as {args.out / 'fft.png'}")
     storage.check_file(args.out)  # before any work
     sources = {str(s): _agents(s) for s in dict.fromkeys(args.sources)}
+    _check_renderer([a for found in sources.values() for a in found])
     table, rows = compare_runs(sources, args.out, args.seed, args.max_steps)
     storage.write_text(args.out.with_suffix(".md"), table)
     storage.write_json(args.out.with_suffix(".json"), rows)
@@ -248,6 +274,7 @@ def cmd_evaluate(args) -> int:
 
     out = args.out if args.out is None else storage.check_file(args.out, example="evaluation.md")  # before any work
     sources = {str(s): _agents(s) for s in dict.fromkeys(args.sources)}
+    _check_renderer([a for found in sources.values() for a in found])
     table, rows = evaluate_runs(sources, args.episodes, args.seed, not args.stochastic, args.max_steps,
                                 log=lambda line: print(line, file=sys.stderr, flush=True))
     print(table, end="")

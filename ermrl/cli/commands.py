@@ -27,7 +27,7 @@ def add_parsers(sub, formatter) -> None:
                    help="the first seed: e.g. 1000 trains on seeds no evolution used (they use 0..S-1)")
     p.add_argument("--no-reservoir", action="store_true", help="plain PPO: the policy sees the observation")
     options.add_options(p, "env", "agent", "ppo", "model", "tensorboard", "agents")
-    p.add_argument("--out", type=Path, default=None,
+    p.add_argument("--out", type=options.path, default=None,
                    help="run folder (default runs/train-ENV-TIME). With --out, the run's state is kept in "
                         "OUT.snapshot while it trains, and the same command run again after a stop resumes from "
                         "it, to the same results")
@@ -46,7 +46,7 @@ def add_parsers(sub, formatter) -> None:
                    help="env id; repeat for a fitness over several envs (default CartPoleNoVel-v1)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per trial; its fitness is their mean")
     options.add_options(p, "env", "agent", "ppo", "search", "workers")
-    p.add_argument("--baselines", type=Path, default=None, metavar="TABLE",
+    p.add_argument("--baselines", type=options.path, default=None, metavar="TABLE",
                    help="baselines table (default runs/baselines.json over the shipped one); several envs only")
     p.add_argument("--allow-weak-baselines", action="store_true",
                    help="go on when vanilla PPO does not beat the random agent on an env at this budget (nScore is "
@@ -89,8 +89,8 @@ def add_parsers(sub, formatter) -> None:
     p = sub.add_parser("plot", help="plot several run folders' learning curves together",
                        description="Read the curves.csv of each run folder (from `ermrl train` or `ermrl test`) and "
                                    "draw every model in one figure, mean ± std over seeds.", formatter_class=formatter)
-    p.add_argument("runs", type=Path, nargs="+", help="run folders holding curves.csv")
-    p.add_argument("--out", type=Path, required=True, help="figure path (.png; .svg is written beside it too)")
+    p.add_argument("runs", type=options.path, nargs="+", help="run folders holding curves.csv")
+    p.add_argument("--out", type=options.path, required=True, help="figure path (.png; .svg is written beside it too)")
     p.add_argument("--title", default="", help="figure title (default: the env id of the first run)")
     common.config_and_quiet(p, quiet=False)
 
@@ -103,9 +103,15 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--seeds", type=int, default=3, help="PPO seeds (0..N-1, the evolution's)")
     p.add_argument("--random-episodes", type=int, default=100, help="random-agent episodes per env")
     options.add_options(p, "env", "agent", "ppo", skip=())
-    p.add_argument("--table", type=Path, default=None, help="table to update (default runs/baselines.json)")
+    p.add_argument("--table", type=options.path, default=None, help="table to update (default runs/baselines.json)")
     p.add_argument("--recompute", action="store_true", help="recompute entries that the table already has")
     common.config_and_quiet(p)
+
+
+MAX_SEED = 2**31 - 1
+"""The largest agent seed: seeds are int32 in a population."""
+MAX_SAMPLER_SEED = 2**32 - 1
+MAX_RANDOM_EPISODES = 1_000_000
 
 
 # -- train and plot --------------------------------------------------------------------------------------
@@ -137,16 +143,19 @@ def cmd_train(args) -> int:
     from ermrl.analysis import tensorboard
     from ermrl.analysis.plots import learning_curves
     from ermrl.cli.progress import TrainingBar
-    from ermrl.training import Population, Trainer
+    from ermrl.training import Population, Trainer, memory
 
     k = 0 if args.no_reservoir or args.model == "lstm" else args.reservoirs
-    options.describe_env(args, args.env)  # fail fast on an unknown id, a missing extra or settings it cannot take
+    info = options.describe_env(args, args.env)  # fail fast: an unknown id, a missing extra, settings it cannot take
     if args.tensorboard is not None:
         tensorboard.check_logdir(args.tensorboard)
     if args.seeds < 1:
         raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
     if args.first_seed < 0:
         raise ConfigError(f"--first-seed must be >= 0, got {args.first_seed}")
+    if args.first_seed + args.seeds - 1 > MAX_SEED:
+        raise ConfigError(f"--first-seed + --seeds - 1 must be <= {MAX_SEED} (seeds are 32-bit integers), got "
+                          f"{args.first_seed + args.seeds - 1}")
     if not args.snapshot_every >= 0:
         raise ConfigError(f"--snapshot-every must be >= 0 seconds, got {args.snapshot_every}")
     if args.skip_connection and k == 0:
@@ -162,16 +171,18 @@ def cmd_train(args) -> int:
     _check_phi(phi)
     population = Population.grid(phi, list(range(args.first_seed, args.first_seed + args.seeds)),
                                  config.ppo.learning_rate, k)
+    memory.check(config, population.size, info.obs_dim, info.action.feature_dim)
     label = "PPO-LSTM" if args.model == "lstm" else \
         "PPO" if k == 0 else f"ER-MRL ({k} reservoir{'s' if k > 1 else ''})"
-    out = storage.check_folder(args.out or Path("runs") / f"train-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}")
+    out = args.out or Path("runs") / f"train-{args.env}-{time.strftime('%Y%m%d-%H%M%S')}"
+    storage.check_folder(storage.check_rerun_folder(out, "train"))
 
     # with --out, a stopped run resumes from OUT.snapshot when run again (written every few minutes)
-    snapshot = Path(f"{out}.snapshot") if args.out else None
+    snapshot = _own_snapshot(Path(f"{out}.snapshot")) if args.out else None
     with TrainingBar(f"{args.env} × {args.seeds} seeds", enabled=not args.quiet) as bar:
         results = Trainer(config).run(population, bar.update, snapshot=snapshot, snapshot_every_s=args.snapshot_every,
                                       log=print)
-    with storage.staged_folder(out) as stage:  # all or nothing: summary.json, which marks it complete, last
+    with storage.staged_folder(out, stale=agent_files.AGENT_FILES) as stage:  # all or nothing: summary.json last
         run = storage.write_train_run(stage, config, results, label, options.effective(args))
         if args.save_agents:
             agent_files.write_agents(run.folder / agent_files.AGENTS_DIR, config, results, label)
@@ -194,6 +205,34 @@ def cmd_train(args) -> int:
     if args.tensorboard is not None:
         print(f"TensorBoard: tensorboard --logdir {args.tensorboard}")
     return 0
+
+
+def _check_memory(train_config, agents: int, what: str) -> None:
+    """:func:`ermrl.training.memory.check` of ``agents`` agents trained with ``train_config`` on its env."""
+    from ermrl import envs
+    from ermrl.training import memory
+
+    info = envs.describe(train_config.env_id, train_config.backend)
+    memory.check(train_config, agents, info.obs_dim, info.action.feature_dim, what)
+
+
+def _own_snapshot(path: Path) -> Path:
+    """``path`` if it is free or holds a training snapshot (which the run may resume from, then replaces and
+    removes); ConfigError before any work when something else is there, so that it is never overwritten."""
+    from ermrl.training import snapshots
+
+    if path.is_dir() or path.exists() and not _is_snapshot(path, snapshots):
+        raise ConfigError(f"{path} is in the way: the run keeps its snapshot there, and it is not one (or is "
+                          "damaged); move it away or give another --out")
+    return path
+
+
+def _is_snapshot(path: Path, snapshots) -> bool:
+    try:
+        snapshots.read_any(path)
+    except Exception:  # another format, or damaged: zipfile, NumPy, JSON or key errors
+        return False
+    return True
 
 
 def cmd_plot(args) -> int:
@@ -224,24 +263,28 @@ def cmd_evolve(args) -> int:
     from ermrl.cli.progress import EvolutionBar
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.evolve import count, estimate_seconds, evolve, make_trainers
-    from ermrl.evolution.study import ATTR, SAMPLERS, make_sampler, open_study, shown_url
+    from ermrl.evolution.study import (ATTR, SAMPLERS, check_resumable, check_writable, make_sampler, open_study,
+                                       shown_url)
     from ermrl.evolution.workers import WorkerConfig, worker_seed
     from ermrl.experiments import baseline_runs
+    from ermrl.training import memory
 
     if args.sampler not in SAMPLERS:
         raise ConfigError(f"unknown sampler {args.sampler!r}; choose one of {', '.join(SAMPLERS)}")
     env_ids = tuple(args.env or ["CartPoleNoVel-v1"])
-    for env_id in env_ids:
-        options.describe_env(args, env_id)
-    if args.sampler_seed is not None and args.sampler_seed < 0:
-        raise ConfigError(f"--sampler-seed must be >= 0, got {args.sampler_seed}")
+    infos = [options.describe_env(args, env_id) for env_id in env_ids]
+    if args.sampler_seed is not None and not 0 <= args.sampler_seed <= MAX_SAMPLER_SEED:
+        raise ConfigError(f"--sampler-seed must be in 0..{MAX_SAMPLER_SEED} (NumPy's seeds), got {args.sampler_seed}")
     config = EvolveConfig(train=options.train_config(args, env_ids[0]), space=options.search_space(args),
                           trials=args.trials, seeds=args.seeds, sampler=args.sampler, popsize=args.popsize,
                           sampler_seed=args.sampler_seed, envs=env_ids if len(env_ids) > 1 else (),
                           normalization=args.normalization, seed_schedule=args.seed_schedule)
     worker = WorkerConfig(args.batch, args.worker_index, args.heartbeat_interval, args.grace_period)
+    agents = min(worker.batch or config.generation_size, config.trials) * config.seeds  # trained at once, per env
+    for env_id, info in zip(env_ids, infos):
+        memory.check(config.train_for(env_id), agents, info.obs_dim, info.action.feature_dim, "a generation")
     common.check_study_name(args.study)
-    name = args.study or "+".join(env_ids) + f"-{args.reservoirs}res-{args.timesteps // 1000}k"
+    name = args.study or "+".join(env_ids).replace("/", "-") + f"-{args.reservoirs}res-{args.timesteps // 1000}k"
     args.study = name
     if config.normalized:  # a damaged table or a folder given as one fails now, not after the baselines run
         from ermrl.experiments import baselines as bl
@@ -249,6 +292,8 @@ def cmd_evolve(args) -> int:
         bl.load_table(storage.check_file(args.baselines or bl.default_table(), "--baselines", "baselines.json"))
     storage_url = common.storage_url(args)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
+    check_writable(storage_url)  # a read-only storage, and a resumption with other settings, fail before any work
+    check_resumable(storage_url, name, storage.encode_study_record(config))
     if config.normalized:
         config = baseline_runs.with_baselines(config, args.baselines, storage_url, name, print,
                                               allow_weak=args.allow_weak_baselines)
@@ -286,12 +331,15 @@ def cmd_evolve(args) -> int:
 def cmd_select(args) -> int:
     from ermrl import storage
     from ermrl.evolution.selection import ranked_trials, recorded_selection, select, ties_at_cut
-    from ermrl.evolution.study import ATTR, load_study
+    from ermrl.evolution.study import ATTR, check_writable, load_study
 
     if args.top < 1 or args.seeds < 1:
         raise ConfigError(f"--top and --seeds must be >= 1, got {args.top} and {args.seeds}")
     study = load_study(common.storage_url(args), args.study)
+    check_writable(common.storage_url(args))  # the selection is recorded in the study
     config = storage.decode_study_record(study.user_attrs[ATTR])
+    for env_id in config.env_ids:
+        _check_memory(config.train_for(env_id), min(args.top, len(study.trials)) * args.seeds, "the selection")
     ranked = ranked_trials(study)
     tied = ties_at_cut(ranked, args.top)
     if tied:
@@ -334,7 +382,9 @@ def cmd_test(args) -> int:
 
         envs.describe(test.env_id)  # an unknown id or a missing simulator, before opening the study
     study = load_study(common.storage_url(args), args.study)
-    storage.decode_study_record(study.user_attrs[ATTR])
+    config = storage.decode_study_record(study.user_attrs[ATTR])
+    _check_memory(config.train_for(test.env_id or config.env_ids[0]), test.seeds * max(1, len(test.ermrl_lrs)),
+                  "the test phase")
     out = storage.check_folder(test_dir(common.run_dir(args), study.user_attrs[ATTR], test.env_id))
     progress, close = common.bars(args.quiet)
     models: list = []  # (label, Results) of every model, for TensorBoard
@@ -383,6 +433,10 @@ def cmd_baselines(args) -> int:
         options.describe_env(args, env_id)
     if args.seeds < 1 or args.random_episodes < 1:
         raise ConfigError(f"--seeds and --random-episodes must be >= 1, got {args.seeds} and {args.random_episodes}")
+    if args.random_episodes > MAX_RANDOM_EPISODES:
+        raise ConfigError(f"--random-episodes must be <= {MAX_RANDOM_EPISODES:,}, got {args.random_episodes}")
+    for env_id in args.env:
+        _check_memory(options.train_config(args, env_id, 0), args.seeds, "the PPO baseline")
     ppo = options.ppo_config(args)
     lr = ppo.learning_rate
     progress, close = common.bars(args.quiet)

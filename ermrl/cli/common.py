@@ -21,14 +21,30 @@ def study_location(p, required: bool = True) -> None:
     p.add_argument("--study", required=required, default=None,
                    help="study name, as given to or printed by `ermrl evolve`" + ("" if required else
                                                                                    " (default ENV-Kres-STEPSk)"))
-    p.add_argument("--storage", default=None, help="Optuna storage URL or journal file (default sqlite in runs/STUDY)")
-    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/STUDY)")
+    p.add_argument("--storage", type=options.storage, default=None, help="Optuna storage URL or journal file (default sqlite in runs/STUDY)")
+    p.add_argument("--out", type=options.path, default=None, help="run folder (default runs/STUDY)")
 
 
-def check_study_name(name: str | None) -> None:
-    if name is not None and not name.strip():
-        raise ConfigError("--study is empty; give the study's name (e.g. cartpole-1res), or leave --study out "
+STUDY_NAME_MAX = 100
+"""The longest study name: it names the study's folder (runs/NAME), whose files add their own names to it."""
+
+
+def check_study_name(name: str | None, flag: str = "--study") -> None:
+    """A study name is one folder name under runs/: not empty, no path separator, not '.' or '..', no control
+    characters, at most :data:`STUDY_NAME_MAX` characters; else ConfigError, so that no study is written outside
+    runs/ (``--study ../../x``, an absolute path) or fails on an over-long file name."""
+    if name is None:
+        return
+    if not name.strip():
+        raise ConfigError(f"{flag} is empty; give the study's name (e.g. cartpole-1res), or leave {flag} out "
                           "for `ermrl evolve` to name it")
+    bad = next((c for c in name if c in "/\\" or not c.isprintable()), None)
+    if bad is not None or name.strip(".") == "":
+        what = f"it holds {bad!r}" if bad is not None else "it is only dots"
+        raise ConfigError(f"{flag} {name!r} is not a plain name ({what}); a study's files go in runs/NAME, so give "
+                          "a name without / or \\ (e.g. cartpole-1res), and --out or --storage to put them elsewhere")
+    if len(name) > STUDY_NAME_MAX:
+        raise ConfigError(f"{flag} is {len(name)} characters long; give a name of at most {STUDY_NAME_MAX}")
 
 
 def run_dir(args) -> Path:

@@ -31,12 +31,14 @@ def add_parser(sub, formatter) -> None:
 
 
 def run_command(args) -> int:
+    from ermrl.cli.common import check_study_name
     from ermrl.evolution.study import default_storage, load_study, make_storage, shown_url
 
     if not 0 <= args.port <= 65535:
         raise ConfigError(f"--port {args.port} is not a port; give 1..65535, or 0 for any free port")
     if importlib.util.find_spec("optuna_dashboard") is None:
         raise ConfigError("optuna-dashboard is not installed; install it with pip install 'ermrl[dashboard]'")
+    check_study_name(args.study)
     url = args.storage or default_storage(args.out or Path("runs") / args.study)
     load_study(url, args.study)  # one-line errors; never creates a storage file just to look
     import optuna_dashboard  # after the cheap checks: it imports scikit-learn (seconds)

@@ -18,19 +18,19 @@ def add_parser(sub, formatter) -> None:
                        formatter_class=formatter)
     esub = p.add_subparsers(dest="experiment_command", required=True, metavar="list|run")
     lst = esub.add_parser("list", help="name every experiment, its studies and claims", formatter_class=formatter)
-    lst.add_argument("--config", type=Path, default=None, help=argparse_hidden())
+    lst.add_argument("--config", type=options.path, default=None, help=argparse_hidden())
     run = esub.add_parser("run", help="run (or resume) one experiment", formatter_class=formatter)
     run.add_argument("name", help="experiment name (see `ermrl experiment list`)")
     run.add_argument("--scale", default="small", choices=["smoke", "small", "medium", "paper"],
                      help="budgets: smoke (seconds a study, for tests), small (a first answer here), medium (the "
                           "paper's trial budget, 60 trials), paper (`ermrl experiment list` gives each one's numbers)")
     run.add_argument("--only", nargs="+", default=(), metavar="STUDY", help="run only these studies of the experiment")
-    run.add_argument("--storage", default=None,
+    run.add_argument("--storage", type=options.storage, default=None,
                      help="Optuna storage URL or journal file for every study (default a journal file in the folder)")
-    run.add_argument("--out", type=Path, default=None, help="folder (default runs/experiments/NAME-SCALE)")
-    run.add_argument("--baselines", type=Path, default=None, metavar="TABLE",
+    run.add_argument("--out", type=options.path, default=None, help="folder (default runs/experiments/NAME-SCALE)")
+    run.add_argument("--baselines", type=options.path, default=None, metavar="TABLE",
                      help="baselines table for studies over several envs (default runs/baselines.json over the shipped one)")
-    run.add_argument("--baseline-store", type=Path, default=None, metavar="DIR", help=options.BASELINE_STORE_HELP)
+    run.add_argument("--baseline-store", type=options.path, default=None, metavar="DIR", help=options.BASELINE_STORE_HELP)
     run.add_argument("--no-estimate", action="store_true", help="do not measure env step costs for the estimate")
     for flag, field, kwargs in (("--test-seeds", "seeds", {"type": int, "metavar": "N"}),
                                 ("--test-timesteps", "timesteps", {"type": int, "metavar": "N"}),
@@ -77,7 +77,7 @@ def _run(args) -> int:
 
     from ermrl import envs, storage
     from ermrl.cli.common import bars, busy_note
-    from ermrl.evolution.study import make_storage, shown_url
+    from ermrl.evolution.study import check_writable, make_storage, shown_url
     from ermrl.experiments import registry, runner
 
     experiment, scale = registry.get(args.name), registry.get_scale(args.scale)
@@ -106,6 +106,7 @@ def _run(args) -> int:
     for env_id in sorted({e for p in plans for e in p.config.env_ids + tuple(t.env_id for t in p.tests if t.env_id)}):
         envs.describe(env_id, args.backend)  # every env exists and its simulator is installed, before any work
     url = args.storage or runner.default_storage(folder)
+    check_writable(url)
     make_storage(url)
     done, left, unselected = {}, {}, {p.study for p in plans}
     optuna.logging.set_verbosity(optuna.logging.WARNING)

@@ -71,6 +71,21 @@ class Option:
         parser.add_argument(self.flag, help=text, dest=self.dest, **kwargs)
 
 
+def path(value: str) -> Path:
+    """argparse type of every path option: a non-empty path (an empty one would mean the current folder)."""
+    if not value.strip():
+        raise argparse.ArgumentTypeError("is an empty path; give a path, or leave the option out for its default")
+    return Path(value)
+
+
+def storage(value: str) -> str:
+    """argparse type of --storage: a non-empty Optuna storage URL or journal file path."""
+    if not value.strip():
+        raise argparse.ArgumentTypeError("is empty; give sqlite:///PATH.db, a journal file PATH.log or a database "
+                                         "URL, or leave --storage out for the study's own sqlite file")
+    return value
+
+
 def workers(value: str):
     """argparse type of --env-workers: 'auto' or an integer >= 0."""
     if value == "auto":
@@ -162,7 +177,7 @@ def _groups() -> dict[str, list[Option]]:
                         "at most: for models longer than one sitting (LunarLander at 3M steps). Results are the "
                         "same up to rounding. Default: all agents of a model at once (the fastest).",
                         kwargs={"type": int, "metavar": "N"}),
-                 Option("--baseline-store", help=BASELINE_STORE_HELP, kwargs={"type": Path, "metavar": "DIR"})],
+                 Option("--baseline-store", help=BASELINE_STORE_HELP, kwargs={"type": path, "metavar": "DIR"})],
         "agents": [Option("--save-agents", help="save every agent's final policy in the run folder's agents/ "
                                                 "(one .npz each, about 100 kB at the default sizes; "
                                                 "ermrl.load_agent loads one).",
@@ -171,7 +186,7 @@ def _groups() -> dict[str, list[Option]]:
                                                      "folder per agent (LABEL_seedN) with SB3's tag names "
                                                      "(rollout/ep_rew_mean; rollout/ep_len_mean, time/fps, train/* "
                                                      "where known), the env step count as the global step.",
-                               kwargs={"type": Path, "metavar": "DIR"})],
+                               kwargs={"type": path, "metavar": "DIR"})],
     }
 
 
@@ -199,7 +214,7 @@ def add_options(parser: argparse.ArgumentParser, *groups: str, skip: tuple[str, 
 
 
 def add_config_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", type=Path, default=None, metavar="FILE",
+    parser.add_argument("--config", type=path, default=None, metavar="FILE",
                         help="a TOML or YAML file of option values keyed by flag name (e.g. units = 50); "
                              "flags given on the command line override it")
 

@@ -5,7 +5,15 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from ermrl.cli import options
 from ermrl.errors import ConfigError
+
+
+MIN_FPS, MAX_FPS = 0.1, 1000.0
+"""The frame rates a video may have."""
+MAX_EPISODES = 100
+MAX_SEED = 2**32 - 1
+"""Gymnasium seeds an env's NumPy generator, which takes seeds below 2**32 here."""
 
 
 def add_parser(sub, formatter) -> None:
@@ -14,10 +22,10 @@ def add_parser(sub, formatter) -> None:
                                    "Gymnasium env with render_mode='rgb_array' and write the frames with imageio. "
                                    "MuJoCo envs render headless (OSMesa or EGL, see MUJOCO_GL).",
                        formatter_class=formatter)
-    p.add_argument("run", type=Path, nargs="?", default=None,
+    p.add_argument("run", type=options.path, nargs="?", default=None,
                    help="run folder (from `ermrl train`, a test phase or a study folder): films its first saved agent")
-    p.add_argument("--agent", type=Path, default=None, metavar="FILE", help="the agent file (.npz) to film")
-    p.add_argument("--out", type=Path, default=None, metavar="FILE.mp4|.gif",
+    p.add_argument("--agent", type=options.path, default=None, metavar="FILE", help="the agent file (.npz) to film")
+    p.add_argument("--out", type=options.path, default=None, metavar="FILE.mp4|.gif",
                    help="video file (default RUN/videos/AGENT-env-seedS.mp4)")
     p.add_argument("--episodes", type=int, default=1, help="episodes, one after the other in one file")
     p.add_argument("--seed", type=int, default=0, help="env seed of the first episode (then seed + 1, ...)")
@@ -66,8 +74,14 @@ def _check_numbers(args) -> None:
         raise ConfigError(f"--max-steps must be >= 1, got {args.max_steps}")
     if args.seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
-    if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
-        raise ConfigError(f"--fps must be a positive number, got {args.fps}; or leave it out for the env's rate")
+    if args.episodes > MAX_EPISODES:
+        raise ConfigError(f"--episodes must be <= {MAX_EPISODES} (their frames are held until the file is written), "
+                          f"got {args.episodes}")
+    if args.seed > MAX_SEED:
+        raise ConfigError(f"--seed must be <= {MAX_SEED}, got {args.seed}")
+    if args.fps is not None and not (math.isfinite(args.fps) and MIN_FPS <= args.fps <= MAX_FPS):
+        raise ConfigError(f"--fps must be between {MIN_FPS:g} and {MAX_FPS:g} frames per second, got {args.fps:g}; or "
+                          "leave it out for the env's rate")
     if args.out is not None and args.out.suffix.lower() not in FORMATS:
         raise ConfigError(f"video file {args.out} must end in .mp4 or .gif")
 

@@ -20,6 +20,10 @@ GENERATION_SEEDS = 100_000
 """The first seed of the 'generation' schedule, far from the test phases' (1000…) and selection's (2000…)."""
 
 
+MAX_TRIALS = 100_000
+"""The most trials a study may have."""
+
+
 @dataclasses.dataclass(frozen=True)
 class EvolveConfig:
     """An evolution: what each candidate's training is, and how many candidates to try."""
@@ -52,6 +56,8 @@ class EvolveConfig:
         for name in ("trials", "seeds"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"--{name} must be >= 1, got {getattr(self, name)}")
+        if self.trials > MAX_TRIALS:
+            raise ConfigError(f"--trials must be <= {MAX_TRIALS:,} (the paper's studies have 900), got {self.trials}")
         if self.popsize is not None and self.popsize < 2:
             raise ConfigError(f"--popsize must be >= 2 (CMA-ES needs at least 2 candidates a generation), got {self.popsize}")
         if self.seed_schedule not in SEED_SCHEDULES:

@@ -45,14 +45,17 @@ def make_storage(url: str, heartbeat: tuple[int, int] | None = None) -> optuna.s
     journal = url.startswith("journal:") or url.endswith((".log", ".jsonl"))
     try:
         if journal:
-            path = storage_file(url)
+            _check_journal(storage_file(url))
+            path = storage_file(url).absolute()  # the lock link's target: a relative one would dangle
             path.parent.mkdir(parents=True, exist_ok=True)
-            from ermrl.atomic import repair_journal
+            from ermrl.atomic import journal_lock, repair_journal
 
             repair_journal(path)  # a torn last line (a writer killed mid-append, a full disk) would poison the next append
-            return optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(path)))
+            backend = optuna.storages.journal.JournalFileBackend(str(path), lock_obj=journal_lock(path))
+            return optuna.storages.JournalStorage(backend)
         if url.startswith("sqlite:///"):
-            Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
+            _check_sqlite(storage_file(url))
+            storage_file(url).parent.mkdir(parents=True, exist_ok=True)
         if driver_missing(url):
             raise ConfigError(f"cannot open storage {shown_url(url)!r}: the PostgreSQL driver is not installed; run "
                               "pip install 'ermrl[workers]'")
@@ -63,6 +66,33 @@ def make_storage(url: str, heartbeat: tuple[int, int] | None = None) -> optuna.s
         reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise ConfigError(f"cannot open storage {shown_url(url)!r} ({reason}); use sqlite:///PATH.db, a journal file PATH.log, "
                           "or a reachable database URL") from None
+
+
+SQLITE_HEADER = b"SQLite format 3\x00"
+
+
+def _check_journal(path: Path) -> None:
+    """ValueError when ``path`` exists, is not empty, and its first line is not an Optuna journal record: Optuna
+    would take a one-line file for a torn write and append to it, changing a file that is not a study's."""
+    if not path.is_file() or path.stat().st_size == 0:
+        return
+    with open(path, "rb") as f:
+        first = f.readline(1 << 20)
+    try:
+        record = json.loads(first)
+    except ValueError:
+        record = None
+    if not (isinstance(record, dict) and "op_code" in record):
+        raise ValueError(f"{path} is not an Optuna journal: its first line is no journal record")
+
+
+def _check_sqlite(path: Path) -> None:
+    """ValueError when ``path`` exists, is not empty, and is no SQLite database, which SQLite would overwrite."""
+    if not path.is_file() or path.stat().st_size == 0:
+        return
+    with open(path, "rb") as f:
+        if f.read(len(SQLITE_HEADER)) != SQLITE_HEADER:
+            raise ValueError(f"{path} is not a SQLite database")
 
 
 def shown_url(url: str) -> str:
@@ -109,14 +139,73 @@ def open_study(storage_url: str, name: str, sampler, record: dict | None,
         if stored is None:
             study.set_user_attr(ATTR, record)
             stored = study.user_attrs[ATTR]  # a worker started at the same moment may have written its own
-            differs = _comparable(stored) != _comparable(record)
         else:
-            differs = _comparable(_current(stored)) != _comparable(record)
-        if differs:
-            raise ConfigError(f"study {name!r} already exists with another config; rerun with the same flags to "
-                              "resume it, or pick a new --study name")
+            stored = _current(stored)
+        _check_same_config(name, stored, record)
         _record_software(study, name)
     return study
+
+
+def check_resumable(storage_url: str, name: str, record: dict) -> None:
+    """ConfigError when study ``name`` exists in ``storage_url`` with a config other than ``record``: the check
+    of :func:`open_study`, before work that comes first (the baselines of several envs). Creates nothing."""
+    path = storage_file(storage_url)
+    if path is not None and not path.is_file():
+        return
+    storage = make_storage(storage_url, heartbeat=None)
+    try:
+        stored = optuna.load_study(study_name=name, storage=storage).user_attrs.get(ATTR)
+    except KeyError:
+        return
+    if stored is not None:
+        _check_same_config(name, _current(stored), record)
+
+
+def _check_same_config(name: str, stored: dict, record: dict) -> None:
+    """ConfigError naming the first setting in which the study's config ``stored`` and this run's ``record``
+    differ (:func:`_comparable`)."""
+    a, b = json.loads(_comparable(stored)), json.loads(_comparable(record))
+    if a == b:
+        return
+    shown = [f"{key}: {_shown(was)} in the study, {_shown(now)} here" for key, was, now in _differences(a, b)]
+    raise ConfigError(f"study {name!r} already exists with another config ({'; '.join(shown[:3])}"
+                      f"{'; ...' if len(shown) > 3 else ''}); rerun with the same flags to resume it, or pick a new "
+                      "--study name")
+
+
+def _differences(a, b, key: str = "") -> list[tuple[str, object, object]]:
+    """(dotted key, value in ``a``, value in ``b``) of every leaf where the JSON values ``a`` and ``b`` differ,
+    keys in sorted order; a key missing on one side has the value None there."""
+    if not (isinstance(a, dict) and isinstance(b, dict)):
+        return [(key, a, b)]
+    return [d for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)
+            for d in _differences(a.get(k), b.get(k), f"{key}.{k}" if key else k)]
+
+
+def _shown(value) -> str:
+    return "unset" if value is None else json.dumps(value)
+
+
+def check_writable(storage_url: str) -> None:
+    """ConfigError before any work when the file behind a SQLite or journal storage cannot be written: its
+    folder refuses new files (SQLite writes its journal beside it) or the file cannot be opened for writing
+    (a read-only file system, a file of another user). A database server is checked when it is opened."""
+    path = storage_file(storage_url)
+    if path is None:
+        return
+    from ermrl.atomic import cannot_write
+
+    folder = next(p for p in path.absolute().parents if p.exists())
+    reason = f"{folder} is a file" if not folder.is_dir() else cannot_write(folder)
+    if reason is None and path.exists():
+        try:
+            open(path, "r+b").close()
+        except OSError as e:
+            reason = f"{path}: {(e.strerror or type(e).__name__).lower()}"
+    elif reason is not None and folder.is_dir():
+        reason = f"{folder}: {reason}"
+    if reason is not None:
+        raise ConfigError(f"cannot write storage {shown_url(storage_url)!r} ({reason}); give a storage you can write")
 
 
 def _record_software(study: optuna.Study, name: str) -> None:
@@ -137,6 +226,8 @@ def load_study(storage_url: str, name: str) -> optuna.Study:
     path = storage_file(storage_url)
     if path is not None and not path.exists():  # never create an empty database or journal just to look
         raise ConfigError(f"no study {name!r}: {path} does not exist; run `ermrl evolve` first or pass --storage/--out")
+    if storage_url.startswith("sqlite:///"):  # Optuna would create its tables in any SQLite file, even an empty one
+        _check_study_database(storage_url, path)
     storage = make_storage(storage_url)
     try:
         study = optuna.load_study(study_name=name, storage=storage)
@@ -146,6 +237,61 @@ def load_study(storage_url: str, name: str) -> optuna.Study:
     if ATTR not in study.user_attrs:
         raise ConfigError(f"study {name!r} was not made by `ermrl evolve` (no '{ATTR}' attribute)")
     return study
+
+
+DAMAGED = ("malformed", "not a database")
+"""What SQLite says of a damaged database file ("database disk image is malformed", "file is not a database")."""
+
+
+def damaged_database(e: BaseException | None) -> str | None:
+    """SQLite's reason when ``e`` or an exception behind it (sqlite3's or SQLAlchemy's DatabaseError, possibly
+    wrapped by Optuna) says the database file is damaged (:data:`DAMAGED`); None for anything else."""
+    import sqlite3
+
+    while e is not None:
+        for error in (e, getattr(e, "orig", None)):  # SQLAlchemy's DatabaseError holds sqlite3's as .orig
+            if isinstance(error, sqlite3.DatabaseError) and any(text in str(error) for text in DAMAGED):
+                return (str(error).strip().splitlines() or [""])[0]
+        e = e.__cause__ or e.__context__
+    return None
+
+
+def damaged_storage_message(storage_url: str, reason: str) -> str:
+    """The one-line error for a damaged storage ``storage_url`` (its password hidden)."""
+    return f"storage {shown_url(storage_url)!r} is damaged ({reason}); restore it from a copy, or start a new study"
+
+
+def _check_study_database(storage_url: str, path: Path) -> None:
+    """ConfigError unless the SQLite file ``path`` (of ``storage_url``) is a sound database that holds Optuna's
+    tables (its ``studies`` table), looked at read-only: opening it as a storage would create them in an empty file
+    or in another program's database, which a command that only reads a study must not do; and a damaged page
+    (``PRAGMA quick_check``, which reads every page) is named here, before anything is read from it or written.
+    Other errors (a locked or unreadable file) are left to the storage to report."""
+    import sqlite3
+
+    fix = "give the study.db that `ermrl evolve` wrote (--out or --storage), or run `ermrl evolve` to create the study"
+    if not path.is_file():
+        return
+    if path.stat().st_size == 0:
+        raise ConfigError(f"{path} is empty (0 bytes), not a study database; run `ermrl evolve` to create the "
+                          "study, or pass --storage")
+    try:
+        connection = sqlite3.connect(f"{path.absolute().as_uri()}?mode=ro", uri=True)
+        try:
+            found = connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'studies'")\
+                .fetchone()
+            check = connection.execute("PRAGMA quick_check(1)").fetchone() if found else ("ok",)
+        finally:
+            connection.close()
+    except sqlite3.DatabaseError as e:
+        reason = damaged_database(e)
+        if reason is None or "not a database" in reason:
+            return  # no SQLite file at all, locked, unreadable, ...: the storage's own one-line error says it
+        raise ConfigError(damaged_storage_message(storage_url, reason)) from None
+    if found is None:
+        raise ConfigError(f"{path} is not an Optuna study database (no 'studies' table); {fix}")
+    if check and check[0] != "ok":  # e.g. "Page 3: btreeInitPage() returns error code 11"
+        raise ConfigError(damaged_storage_message(storage_url, "database disk image is malformed"))
 
 
 def _current(record: dict) -> dict:

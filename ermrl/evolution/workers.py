@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import signal
+import sys
 import threading
 import time
 import warnings
@@ -23,7 +24,7 @@ from optuna.exceptions import UpdateFinishedTrialError
 from optuna.trial import FrozenTrial, TrialState
 
 from ermrl.agent import Phi
-from ermrl.errors import TERMINATED, ConfigError
+from ermrl.errors import TERMINATED, ConfigError, raise_terminated
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.generations import ATTR, CMA_GENERATION, FULL, Ledger
 from ermrl.evolution.heartbeat import (GRACE_PERIOD_S, INTERRUPTED, INTERVAL_S, WORKER_ATTR, Heartbeat, WorkerId,
@@ -42,6 +43,11 @@ def _suggest(space, trial: optuna.Trial) -> Phi:
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="divide by zero encountered in scalar divide", category=RuntimeWarning)
         return space.suggest(trial)
+
+
+MAX_WAIT_S = 86_400
+"""The longest heartbeat interval and grace period, in seconds (a day)."""
+MAX_WORKER_INDEX = 2**31 - 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,8 +73,13 @@ class WorkerConfig:
             raise ConfigError(f"--batch must be >= 1, got {self.batch}")
         if self.worker_index < 0:
             raise ConfigError(f"--worker-index must be >= 0, got {self.worker_index}")
+        if self.worker_index > MAX_WORKER_INDEX:
+            raise ConfigError(f"--worker-index must be <= {MAX_WORKER_INDEX:,}, got {self.worker_index}")
         if self.heartbeat_interval < 1:
             raise ConfigError(f"--heartbeat-interval must be >= 1 (seconds), got {self.heartbeat_interval}")
+        if max(self.heartbeat_interval, self.grace_period) > MAX_WAIT_S:
+            raise ConfigError(f"--heartbeat-interval and --grace-period must be <= {MAX_WAIT_S} seconds (a day), "
+                              f"got {self.heartbeat_interval} and {self.grace_period}")
         if self.grace_period <= self.heartbeat_interval:
             raise ConfigError(f"--grace-period ({self.grace_period} s) must be longer than --heartbeat-interval "
                               f"({self.heartbeat_interval} s), or live trials would be failed as lost")
@@ -120,7 +131,8 @@ class Worker:
 
     def __enter__(self) -> "Worker":
         self._sigterm = None
-        if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, raise_terminated):
             self._sigterm = signal.signal(signal.SIGTERM, self._terminate)  # e.g. slurm's time limit or scancel
         self.heartbeat.start()
         return self
@@ -210,9 +222,9 @@ class Worker:
                 w = t.user_attrs.get(WORKER_ATTR)
                 if t.state == TrialState.RUNNING and isinstance(w, dict) and w.get("index") == self.me.index \
                         and not self.me.owns(t):
-                    self.log(f"warning: another worker (pid {w.get('pid')} on {w.get('host')}) also runs with "
-                             f"--worker-index {self.me.index}; give each worker its own index, or their sampler "
-                             "draws repeat")
+                    print(f"warning: another worker (pid {w.get('pid')} on {w.get('host')}) also runs with "
+                          f"--worker-index {self.me.index}; give each worker its own index, or their sampler "
+                          "draws repeat", file=sys.stderr, flush=True)
                     self._warned_index = True
                     break
         return trials

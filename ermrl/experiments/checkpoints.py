@@ -17,6 +17,7 @@ the model; it goes once the model is kept.
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -24,6 +25,7 @@ import numpy as np
 
 from ermrl import agent_files, provenance, storage
 from ermrl.envs.spaces import EnvInfo
+from ermrl.errors import ConfigError
 from ermrl.training.results import Episodes, Policies, Results
 
 FORMAT = "ermrl-test-job"
@@ -60,15 +62,32 @@ def open_partial(out: Path, settings: dict) -> tuple[Path, bool]:
             same = False
         if same:
             return folder, False
-        shutil.rmtree(folder)
+        _remove(folder)
         discarded = True
     storage.write_json(path, settings)
     return folder, discarded
 
 
+OWN_FILES = re.compile(r"settings\.json|[^/]+\.(?:npz|snapshot)|\..+")
+"""The names of what a partial folder holds: its settings, the kept jobs, the snapshot and atomic writes' hidden
+temporary files."""
+
+
+def _remove(folder: Path) -> None:
+    """Removes the partial folder ``folder``; ConfigError, removing nothing, when it holds anything else
+    (:data:`OWN_FILES`), so that a folder of the same name that ermrl did not make is never emptied."""
+    entries = list(folder.iterdir()) if folder.is_dir() else [folder]
+    foreign = sorted(p.name for p in entries if p.is_dir() or not OWN_FILES.fullmatch(p.name))
+    if foreign:
+        raise ConfigError(f"{folder} holds files that ermrl did not write there ({', '.join(foreign[:3])}); "
+                          "move them away, then rerun")
+    shutil.rmtree(folder)
+
+
 def discard(out: Path) -> None:
     """Removes the partial folder of ``out``, if any (the test phase is written, or a rerun will redo it)."""
-    shutil.rmtree(partial_dir(out), ignore_errors=True)
+    if partial_dir(out).exists():
+        _remove(partial_dir(out))
 
 
 def save_job(folder: Path, name: str, identity: dict, results: Results) -> Path:

@@ -36,6 +36,10 @@ FIRST_TEST_SEED = 1000
 policies, envs)."""
 
 
+MAX_TEST_SEEDS = 10_000
+"""The most seeds a test phase may train each model on."""
+
+
 @dataclasses.dataclass(frozen=True)
 class TestConfig:
     """One test phase."""
@@ -61,8 +65,8 @@ class TestConfig:
     at the PPO baselines' learning rate; JAX envs only."""
 
     def __post_init__(self):
-        if self.seeds < 1:
-            raise ConfigError(f"--seeds must be >= 1, got {self.seeds}")
+        if not 1 <= self.seeds <= MAX_TEST_SEEDS:
+            raise ConfigError(f"--seeds must be in 1..{MAX_TEST_SEEDS:,} (the paper tests on 10), got {self.seeds}")
         if self.timesteps < 1:
             raise ConfigError(f"--timesteps must be >= 1, got {self.timesteps}")
         for lr in self.ermrl_lrs + ((self.ppo_lr,) if self.ppo_lr is not None else ()):
@@ -157,7 +161,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     trial, phi, how = chosen_trial(study, config, test.trial)
     base, seeds, ppo_lr = _settings(config, test)
     envs.describe(base.env_id, config.train.backend)  # an unknown id fails before any training
-    storage.check_folder(out)
+    storage.check_folder(storage.check_rerun_folder(out, "test"))
     if env_workers is not None:
         base = dataclasses.replace(base, env_workers=env_workers)
     k = config.space.reservoirs
@@ -207,7 +211,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     title = f"{base.env_id}: test phase, {test.seeds} new seeds"
     if evolved_on != [base.env_id]:
         title += f"\nΦ* evolved on {', '.join(evolved_on)}"
-    with storage.staged_folder(out) as stage:  # all or nothing: summary.json, which marks it complete, last
+    with storage.staged_folder(out, stale=agent_files.AGENT_FILES) as stage:  # all or nothing: summary.json last
         for folder, train_config, part, label in agents:
             agent_files.write_agents(stage / agent_files.AGENTS_DIR / folder, train_config, part, label)
         storage.write_curves_csv(stage / "curves.csv", curves, seed_map)

@@ -15,11 +15,12 @@ from ermrl.agent import AgentConfig
 from ermrl.errors import ConfigError
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.search_space import SearchSpace
-from ermrl.experiments.evaluation import TestConfig, baseline_files
+from ermrl.experiments.evaluation import MAX_TEST_SEEDS, TestConfig, baseline_files
 from ermrl.experiments.registry import Experiment, Scale, StudySpec
 from ermrl.ppo.config import SB3_DEFAULTS
 from ermrl.reservoir import ReservoirSpec
 from ermrl.training import TrainConfig
+from ermrl.training.config import MAX_TIMESTEPS
 
 JAX_RATE = 40_000.0
 """Nominal agent-steps/s of the JAX backend on 2 cores at a generation's population size (docs/benchmarks.md)."""
@@ -67,8 +68,12 @@ class TestBudget:
     def __post_init__(self):
         if self.seeds is not None and self.seeds < 1:
             raise ConfigError(f"--test-seeds must be >= 1, got {self.seeds}")
+        if self.seeds is not None and self.seeds > MAX_TEST_SEEDS:
+            raise ConfigError(f"--test-seeds must be <= {MAX_TEST_SEEDS:,} (the paper tests on 10), got {self.seeds}")
         if self.timesteps is not None and self.timesteps < 1:
             raise ConfigError(f"--test-timesteps must be >= 1, got {self.timesteps}")
+        if self.timesteps is not None and self.timesteps > MAX_TIMESTEPS:
+            raise ConfigError(f"--test-timesteps must be <= {MAX_TIMESTEPS:,}, got {self.timesteps}")
         if self.ermrl_lrs is not None and not self.ermrl_lrs:
             raise ConfigError("--test-lrs needs at least one learning rate, e.g. --test-lrs 1e-4")
         if self.agents_per_run is not None and self.agents_per_run < 1:
@@ -253,7 +258,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
         for t in p.tests:
             out = test_dir(p.run_dir, study.user_attrs[ATTR], t.env_id)
             where = f"    test on {t.env_id or config.env_ids[0]}"
-            if _test_done(out, t, sel.winner):
+            if _test_done(out, t, sel.winner, lambda s, where=where: log(f"{where}: {s}")):
                 checkpoints.discard(out)  # left by a stop between writing the test phase and removing it
                 log(f"{where}: done before, kept ({out})")
                 continue
@@ -275,14 +280,26 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
     return write_experiment_report(experiment, scale, plans, url, folder, randoms)
 
 
-def _test_done(out: Path, test: TestConfig, winner: int) -> bool:
+def _test_done(out: Path, test: TestConfig, winner: int, log: Callable[[str], None] | None = None) -> bool:
     """Whether ``out`` holds this test phase, for this Φ* and settings, finished. The saved settings are decoded
     first, so that fields added to TestConfig since they were written take their defaults instead of forcing
-    the test phase to be redone."""
+    the test phase to be redone. A test phase whose summary.json or test_config.json is damaged (cut short, not
+    what ermrl wrote) is not done: it is redone, and ``log`` tells why."""
     path = out / "test_config.json"
     if not (path.is_file() and (out / "summary.json").is_file()):
         return False
-    saved = storage.read_json(path)
+    problem = storage.test_summary_problem(out)
+    try:
+        saved = storage.read_json(path)
+        if problem is None and not isinstance(saved, dict):
+            problem = f"{path} is damaged or was not written by `ermrl test` (it holds no table of settings)"
+    except ValueError as e:  # JSONDecodeError (cut short), UnicodeDecodeError (not text)
+        problem = problem or (f"{path} is damaged or was not written by `ermrl test` "
+                              f"({type(e).__name__}: {(str(e).strip().splitlines() or [''])[0]})")
+    if problem is not None:
+        if log is not None:
+            log(f"{problem}; redoing this test phase")
+        return False
     names = {f.name for f in dataclasses.fields(TestConfig)}
     try:
         before = storage.from_dict(TestConfig, {k: v for k, v in saved.items() if k in names}, "test_config")

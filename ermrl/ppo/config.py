@@ -9,6 +9,10 @@ from ermrl.errors import ConfigError
 from ermrl.storage import OMIT_WHEN_DEFAULT
 
 
+MAX_EPOCHS = 1000
+"""The most passes over a rollout that an update may make."""
+
+
 @dataclasses.dataclass(frozen=True)
 class PPOConfig:
     """Static PPO settings (they set array shapes or loop lengths), except ``learning_rate``,
@@ -81,6 +85,8 @@ class PPOConfig:
         buffer = self.n_steps * self.n_envs
         if min(self.n_envs, self.n_steps, self.batch_size, self.n_epochs) < 1:
             raise ConfigError("n_envs, n_steps, batch_size and n_epochs must all be >= 1")
+        if self.n_epochs > MAX_EPOCHS:
+            raise ConfigError(f"n_epochs must be <= {MAX_EPOCHS} (SB3's default is 10), got {self.n_epochs}")
         if buffer % self.batch_size:
             raise ConfigError(
                 f"batch_size {self.batch_size} must divide n_steps × n_envs = {buffer}; pick a divisor of {buffer}"

@@ -12,6 +12,10 @@ from ermrl.errors import ConfigError
 from ermrl.ppo.config import PPOConfig
 
 
+MAX_TIMESTEPS = 1_000_000_000
+"""The longest training budget per agent that a config accepts."""
+
+
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """Everything static about a population's training (one compile serves any Φ, seeds and learning rates)."""
@@ -31,6 +35,9 @@ class TrainConfig:
     def __post_init__(self):
         if self.total_timesteps < 1:
             raise ConfigError(f"total timesteps must be >= 1, got {self.total_timesteps}")
+        if self.total_timesteps > MAX_TIMESTEPS:
+            raise ConfigError(f"total timesteps must be <= {MAX_TIMESTEPS:,} per agent (about a day at 10k steps/s; "
+                              f"the paper's longest run is 3M), got {self.total_timesteps:,}")
         if self.env_workers != "auto" and not (isinstance(self.env_workers, int) and self.env_workers >= 0):
             raise ConfigError(f"env workers must be 'auto' or an integer >= 0, got {self.env_workers!r}")
 

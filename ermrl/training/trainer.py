@@ -20,7 +20,7 @@ from ermrl import provenance
 from ermrl.agent import Phi
 from ermrl.envs import HostEnv
 from ermrl.envs.host_groups import ReplayMismatch
-from ermrl.training import snapshots
+from ermrl.training import memory, snapshots
 from ermrl.training.config import Population, TrainConfig
 from ermrl.training.host_loop import HostIteration
 from ermrl.training.programs import programs_for
@@ -162,6 +162,7 @@ class Trainer:
         kept the Results. ``log`` gets a line when a run resumes or cannot."""
         ppo = self.config.ppo
         n = population.size
+        memory.check(self.config, n, self.env.info.obs_dim, self.env.info.action.feature_dim)
         t0 = time.perf_counter()
         ident = None if snapshot is None else snapshots.identity(self.config, population, len(self.devices))
         try:
