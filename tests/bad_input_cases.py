@@ -242,6 +242,14 @@ CASES = [
      "database URL"),
     ("evolve --storage sqlite:///tiny.db", "ermrl evolve: error: cannot open storage 'sqlite:///tiny.db' (tiny.db is "
      "not a SQLite database); use sqlite:///PATH.db, a journal file PATH.log, or a reachable database URL"),
+    ("evolve --storage sqlite:///other.db", "ermrl evolve: error: cannot open storage 'sqlite:///other.db' (other.db "
+     "is a SQLite database of another program (tables notes), not an Optuna study database); use sqlite:///PATH.db, a "
+     "journal file PATH.log, or a reachable database URL"),
+    ("report --study k --storage sqlite:///other.db", "ermrl report: error: other.db is not an Optuna study database "
+     "(no 'studies' table); give the study.db that `ermrl evolve` wrote (--out or --storage), or run `ermrl evolve` "
+     "to create the study"),
+    ("evolve --env CartPole-v1 --env Pendulum-v1 --baselines list.json", "ermrl evolve: error: baselines table "
+     "list.json is damaged (needs a 'random' table and a 'ppo' list); fix it or delete it and rerun `ermrl baselines`"),
     ("evolve --storage junk.log", "ermrl evolve: error: cannot open storage 'junk.log' (junk.log is not an Optuna "
      "journal: its first line is no journal record); use sqlite:///PATH.db, a journal file PATH.log, or a reachable "
      "database URL"),

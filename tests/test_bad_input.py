@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import sqlite3
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,11 @@ def _template(folder: Path) -> None:
     (folder / "junk.log").write_text("a log, not Optuna's\nsecond line\n")
     (folder / "notes.log").write_text("one line of notes, which Optuna would take for a torn record\n")
     (folder / "tiny.db").write_bytes(b"x")  # no SQLite database: SQLite would overwrite it
+    other = sqlite3.connect(folder / "other.db")  # another program's database: Optuna would add its tables
+    other.execute("CREATE TABLE notes (text)")
+    other.commit()
+    other.close()
+    (folder / "list.json").write_text("[]\n")
     (folder / "mine" / "agents" / "mine").mkdir(parents=True)  # a user's folder: `train --out` must not touch it
     (folder / "mine" / "agents" / "README.md").write_text("my notes\n")
     (folder / "mine" / "agents" / "mine" / "policy.pt").write_bytes(b"weights")

@@ -93,6 +93,19 @@ def _check_sqlite(path: Path) -> None:
     with open(path, "rb") as f:
         if f.read(len(SQLITE_HEADER)) != SQLITE_HEADER:
             raise ValueError(f"{path} is not a SQLite database")
+    import sqlite3
+
+    try:
+        connection = sqlite3.connect(f"{path.absolute().as_uri()}?mode=ro", uri=True)
+        try:
+            tables = [name for (name,) in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")]
+        finally:
+            connection.close()
+    except sqlite3.Error:
+        return  # damaged or locked: the storage's own error, or the damaged-database check, names it
+    if tables and "studies" not in tables:
+        raise ValueError(f"{path} is a SQLite database of another program (tables {', '.join(sorted(tables)[:3])}), "
+                         "not an Optuna study database")
 
 
 def shown_url(url: str) -> str:

@@ -181,7 +181,7 @@ def _read(path: Path) -> dict:
 
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
-        if not isinstance(data.get("random"), dict) or not isinstance(data.get("ppo"), list):
+        if not isinstance(data, dict) or not isinstance(data.get("random"), dict) or not isinstance(data.get("ppo"), list):
             raise ValueError("needs a 'random' table and a 'ppo' list")
         return data
     except (ValueError, AttributeError) as e:
