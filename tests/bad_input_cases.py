@@ -31,7 +31,12 @@ CASES = [
                                                  "MountainCarContinuousNoVel-v0, MountainCarNoVel-v0, Pendulum-v1, "
                                                  "PendulumNoVel-v1)"),
     ("train --backend gpu", "ermrl train: error: argument --backend: invalid choice: 'gpu' (choose from 'auto', "
-                            "'jax', 'host'); see `ermrl train --help`"),
+                            "'jax', 'mujoco', 'host'); see `ermrl train --help`"),
+    ("train --env-threads 0", "ermrl train: error: argument --env-threads: must be 'auto' or an integer in 1..4096, "
+                              "got '0'; see `ermrl train --help`"),
+    ("train --env LunarLander-v3 --backend mujoco", "ermrl train: error: env 'LunarLander-v3' has no batched MuJoCo "
+     "version; use --backend host or auto (the MuJoCo backend runs: Ant-v5, HalfCheetah-v5, Hopper-v5, Humanoid-v5, "
+     "HumanoidStandup-v5, Swimmer-v5, Walker2d-v5)"),
     ("train --reservoirs -1", "ermrl train: error: reservoirs must be in 0..100, got -1"),
     ("train --reservoirs 100000000000000000000", "ermrl train: error: reservoirs must be in 0..100, got "
      "100000000000000000000"),
@@ -134,7 +139,8 @@ CASES = [
                                 "did you mean 'units'?"),
     ("train --config evolvekey.toml",
      "ermrl train: error: config file evolvekey.toml: unknown option 'trials' for `ermrl train`; options here: "
-     "activation, backend, batch-size, bias, bias-scaling, clip-range, ent-coef, env, env-workers, feed-action, "
+     "activation, backend, batch-size, bias, bias-scaling, clip-range, ent-coef, env, env-threads, env-workers, "
+     "feed-action, "
      "first-seed, gae-lambda, gamma, input-connectivity, iss, lr, lstm-hidden, lstm-seq-len, max-grad-norm, model, "
      "n-envs, n-epochs, n-steps, net-arch, no-reservoir, normalize, observed-units, ortho-init, out, ppo-lr, preset, "
      "quiet, rc-connectivity, reservoirs, save-agents, sde-sample-freq, seeds, skip-connection, snapshot-every, sr, "

@@ -13,6 +13,7 @@ import traceback
 from typing import NoReturn
 
 import ermrl
+from ermrl import compile_cache
 from ermrl.errors import TERMINATED, ConfigError, RunFailed, raise_terminated
 
 
@@ -170,6 +171,7 @@ def _run(argv: list[str] | None) -> int:
         command = f"ermrl {args.command}"
         if ermrl.CPU_DEVICES_ERROR:
             raise ConfigError(ermrl.CPU_DEVICES_ERROR)
+        compile_cache.enable()  # a second run of the same shapes reads its programs back instead of compiling
         return handlers[args.command](args)
     except ConfigError as e:
         if debug:

@@ -86,6 +86,19 @@ def storage(value: str) -> str:
     return value
 
 
+def threads(value: str):
+    """argparse type of --env-threads: 'auto' or an integer in 1..4096."""
+    if value == "auto":
+        return value
+    try:
+        n = int(value)
+    except ValueError:
+        n = 0
+    if not 1 <= n <= 4096:
+        raise argparse.ArgumentTypeError(f"must be 'auto' or an integer in 1..4096, got {value!r}")
+    return n
+
+
 def workers(value: str):
     """argparse type of --env-workers: 'auto' or an integer >= 0."""
     if value == "auto":
@@ -115,8 +128,9 @@ def _groups() -> dict[str, list[Option]]:
              for hp in ("sr", "lr", "iss") for b in ("min", "max")]
     return {
         "env": [Option("--timesteps", TrainConfig, "total_timesteps", kwargs={"type": int}),
-                Option("--backend", TrainConfig, "backend", kwargs={"choices": ["auto", "jax", "host"]}),
-                Option("--env-workers", TrainConfig, "env_workers", kwargs={"type": workers, "metavar": "N|auto"})],
+                Option("--backend", TrainConfig, "backend", kwargs={"choices": ["auto", "jax", "mujoco", "host"]}),
+                Option("--env-workers", TrainConfig, "env_workers", kwargs={"type": workers, "metavar": "N|auto"}),
+                Option("--env-threads", TrainConfig, "env_threads", kwargs={"type": threads, "metavar": "N|auto"})],
         "agent": [
             Option("--reservoirs", AgentConfig, "reservoirs", kwargs={"type": int}),
             Option("--units", ReservoirSpec, "units", kwargs={"type": int}),
@@ -201,7 +215,7 @@ PPO_SWITCHES = ("normalize", "use_sde", "sde_sample_freq", "activation", "ortho_
 
 AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connectivity", "bias_scaling", "feed_action",
                "skip_connection", "observed_units", "preset", "ppo_lr", *PPO_FIELDS, *PPO_SWITCHES, "net_arch",
-               "timesteps", "backend", "env_workers")
+               "timesteps", "backend", "env_workers", "env_threads")
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
 
@@ -263,7 +277,8 @@ def train_config(args, env_id: str, reservoirs: int | None = None):
     from ermrl.training import TrainConfig
 
     return TrainConfig(env_id=env_id, total_timesteps=args.timesteps, agent=agent_config(args, reservoirs),
-                       ppo=ppo_config(args), backend=args.backend, env_workers=args.env_workers)
+                       ppo=ppo_config(args), backend=args.backend, env_workers=args.env_workers,
+                       env_threads=args.env_threads)
 
 
 def search_space(args):

@@ -1,7 +1,10 @@
 """One registry for every env id: ``describe(env_id)`` and ``make(env_id)``.
 
-Two backends sit behind it: ``jax`` (gymnax, stepped inside the jitted program) and ``host`` (Gymnasium,
-stepped on the host from inside the same program). Velocity masking and the NoVel ids live in :mod:`ermrl.envs.masking`.
+Three backends sit behind it: ``jax`` (gymnax, stepped inside the jitted program), ``mujoco`` (the MuJoCo
+locomotion tasks, stepped in batches by MuJoCo's C library on threads, exact to Gymnasium v5:
+:mod:`ermrl.envs.mujoco_group`) and ``host`` (any Gymnasium env, stepped one by one). The last two are stepped on
+the host between the jitted program's calls (:data:`HOST_BACKENDS`). Velocity masking and the NoVel ids live in
+:mod:`ermrl.envs.masking`.
 """
 
 from __future__ import annotations
@@ -14,7 +17,9 @@ from ermrl.envs.jax_backend import GYMNAX_IDS, JaxEnv
 from ermrl.envs.spaces import ActionSpace, EnvInfo
 from ermrl.errors import ConfigError
 
-BACKENDS = ("auto", "jax", "host")
+BACKENDS = ("auto", "jax", "mujoco", "host")
+HOST_BACKENDS = ("mujoco", "host")
+"""The backends whose envs are stepped on the host (:class:`HostEnv`)."""
 
 
 def jax_ids() -> list[str]:
@@ -34,7 +39,10 @@ def _unknown(env_id: str, base_id: str) -> ConfigError:
 
 
 def resolve_backend(env_id: str, backend: str = "auto") -> str:
-    """The backend that will run ``env_id``: 'jax' when it has a JAX version, else 'host' (Gymnasium)."""
+    """The backend that will run ``env_id``: 'jax' when it has a JAX version, 'mujoco' for the MuJoCo tasks of
+    :data:`~ermrl.envs.mujoco_tasks.TASKS`, else 'host' (Gymnasium)."""
+    from ermrl.envs.mujoco_tasks import TASKS as TASK_IDS
+
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
     base_id, _ = masking.parse(env_id)
@@ -43,6 +51,11 @@ def resolve_backend(env_id: str, backend: str = "auto") -> str:
     if backend == "jax":
         raise ConfigError(f"env {env_id!r} has no JAX version; use --backend host or auto "
                           f"(the JAX backend runs: {', '.join(jax_ids())})")
+    if backend in ("auto", "mujoco") and base_id in TASK_IDS:
+        return "mujoco"
+    if backend == "mujoco":
+        raise ConfigError(f"env {env_id!r} has no batched MuJoCo version; use --backend host or auto (the MuJoCo "
+                          f"backend runs: {', '.join(sorted(TASK_IDS))})")
     if not host_backend.known(base_id):
         raise _unknown(env_id, base_id)
     return "host"
@@ -51,19 +64,24 @@ def resolve_backend(env_id: str, backend: str = "auto") -> str:
 def describe(env_id: str, backend: str = "auto") -> EnvInfo:
     """Observation and action layout of ``env_id`` after masking."""
     base_id, deleted = masking.parse(env_id)
-    if resolve_backend(env_id, backend) == "host":
+    if resolve_backend(env_id, backend) in HOST_BACKENDS:
         return host_backend.describe(env_id, base_id, deleted)
     full = JaxEnv.describe(env_id, base_id, None)
     return JaxEnv.describe(env_id, base_id, masking.kept_dims(full.obs_dim, deleted))
 
 
-def make(env_id: str, backend: str = "auto", workers: int | str = "auto") -> JaxEnv | HostEnv:
-    """An env for ``env_id`` on the chosen backend (``workers``: host env processes, 'auto' or a count)."""
+def make(env_id: str, backend: str = "auto", workers: int | str = "auto",
+         threads: int | str = "auto") -> JaxEnv | HostEnv:
+    """An env for ``env_id`` on the chosen backend (``workers``: Gymnasium env processes, ``threads``: MuJoCo
+    stepping threads; each 'auto' or a count)."""
     info = describe(env_id, backend)
-    if resolve_backend(env_id, backend) == "host":
+    resolved = resolve_backend(env_id, backend)
+    if resolved == "mujoco":
+        return HostEnv(info, threads=threads, batched=True)
+    if resolved == "host":
         return HostEnv(info, workers)
     return JaxEnv(info)
 
 
 __all__ = ["ActionSpace", "EnvInfo", "HostEnv", "JaxEnv", "describe", "make", "jax_ids", "resolve_backend",
-           "BACKENDS"]
+           "BACKENDS", "HOST_BACKENDS"]

@@ -101,12 +101,15 @@ class HostEnv:
 
     Slots are numbered agent · n_envs + env. ``open`` builds them in one in-process group, or splits them
     into ``workers`` contiguous groups, each in its own process; ``step`` then sends every group its actions
-    before waiting for any, so the groups step in parallel.
+    before waiting for any, so the groups step in parallel. ``batched``: one in-process
+    :class:`~ermrl.envs.mujoco_group.MujocoGroup` instead, stepped by MuJoCo on ``threads`` threads (the
+    ``mujoco`` backend).
     """
 
-    def __init__(self, info: EnvInfo, workers: int | str = "auto"):
+    def __init__(self, info: EnvInfo, workers: int | str = "auto", threads: int | str = "auto", batched: bool = False):
         self.info = info
         self.workers = workers
+        self.threads, self.batched = threads, batched
         self.groups: list[EnvGroup | WorkerGroup] = []
         self._step_s: float | None = None
         """``step_seconds`` measured once, not at every ``open`` (an evolution opens once per generation)."""
@@ -126,6 +129,13 @@ class HostEnv:
         """Creates the envs of ``n_slots`` slots (closing any open ones)."""
         self.close()
         args = (self.info.base_id, self.info.kept_dims, self.info.action.discrete)
+        if self.batched:
+            from ermrl.envs.mujoco_group import MujocoGroup
+
+            cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+            threads = cores if self.threads == "auto" else int(self.threads)
+            self.groups = [MujocoGroup(*args, 0, n_slots, threads=min(threads, n_slots))]
+            return
         workers = self.resolved_workers(n_slots)
         if workers == 0:
             self.groups = [EnvGroup(*args, 0, n_slots)]

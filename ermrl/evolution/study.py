@@ -322,5 +322,5 @@ def _comparable(record: dict) -> str:
     are not in the record at all."""
     keep = {k: v for k, v in record.items() if k not in ("trials", "baselines")}
     if isinstance(keep.get("train"), dict):
-        keep["train"] = {k: v for k, v in keep["train"].items() if k != "env_workers"}
+        keep["train"] = {k: v for k, v in keep["train"].items() if k not in ("env_workers", "env_threads")}
     return json.dumps(keep, sort_keys=True, default=str)

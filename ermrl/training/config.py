@@ -10,6 +10,7 @@ import numpy as np
 from ermrl.agent import AgentConfig, Phi
 from ermrl.errors import ConfigError
 from ermrl.ppo.config import PPOConfig
+from ermrl.storage import OMIT_WHEN_DEFAULT
 
 
 MAX_TIMESTEPS = 1_000_000_000
@@ -27,10 +28,13 @@ class TrainConfig:
     agent: AgentConfig = AgentConfig()
     ppo: PPOConfig = PPOConfig()
     backend: str = "auto"
-    """'auto' (JAX when the env has a JAX version, else Gymnasium on the host), 'jax' or 'host'."""
+    """'auto' (JAX when the env has a JAX version, MuJoCo's batched backend for the MuJoCo locomotion tasks, else
+    Gymnasium on the host), 'jax', 'mujoco' or 'host'."""
     env_workers: int | str = "auto"
     """Host backend only: processes that step the envs (0: the main process; 'auto': one per device when an
     env step costs more than the IPC). Results do not depend on it."""
+    env_threads: int | str = dataclasses.field(default="auto", metadata={OMIT_WHEN_DEFAULT: True})
+    """MuJoCo backend only: threads that step the envs ('auto': one per core). Results do not depend on it."""
 
     def __post_init__(self):
         if self.total_timesteps < 1:
@@ -40,6 +44,8 @@ class TrainConfig:
                               f"the paper's longest run is 3M), got {self.total_timesteps:,}")
         if self.env_workers != "auto" and not (isinstance(self.env_workers, int) and self.env_workers >= 0):
             raise ConfigError(f"env workers must be 'auto' or an integer >= 0, got {self.env_workers!r}")
+        if self.env_threads != "auto" and not (isinstance(self.env_threads, int) and 1 <= self.env_threads <= 4096):
+            raise ConfigError(f"env threads must be 'auto' or an integer in 1..4096, got {self.env_threads!r}")
 
 
 @dataclasses.dataclass(frozen=True)

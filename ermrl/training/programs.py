@@ -29,7 +29,7 @@ def make_agent_fns(config: TrainConfig) -> AgentFns:
         from ermrl.training.recurrent import make_recurrent_fns
 
         return make_recurrent_fns(config)
-    env = envs.make(config.env_id, config.backend, config.env_workers)
+    env = envs.make(config.env_id, config.backend, config.env_workers, config.env_threads)
     agent = Agent(config.agent, env.info)
     ppo = config.ppo
     ppo.check_actions(config.env_id, env.info.action.discrete)
@@ -106,6 +106,6 @@ def programs_for(config: TrainConfig, devices: tuple) -> Programs:
     number of iterations and is not part of the key. Host-backend Trainers get their own: their functions hold
     the Gymnasium envs that the Trainer opens and closes."""
     backend = envs.resolve_backend(config.env_id, config.backend)
-    if backend == "host":
+    if backend in envs.HOST_BACKENDS:
         return build_programs(config, devices)
     return _shared_programs(dataclasses.replace(config, total_timesteps=1, backend=backend, env_workers=0), devices)

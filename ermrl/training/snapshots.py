@@ -56,9 +56,11 @@ class Snapshot(NamedTuple):
 
 
 def identity(train_config, population, n_devices: int) -> dict:
-    """What a run's state depends on, JSON-ready. The env workers are left out: results do not depend on them."""
+    """What a run's state depends on, JSON-ready. The env workers and threads are left out: results do not depend
+    on them."""
     train = storage.to_dict(train_config)
     train.pop("env_workers", None)
+    train.pop("env_threads", None)
     return json.loads(json.dumps({
         "train": train, "devices": n_devices, "seeds": np.asarray(population.seeds).tolist(),
         "learning_rates": np.asarray(population.learning_rate).tolist(),

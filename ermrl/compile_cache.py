@@ -1,0 +1,54 @@
+"""JAX's persistent compilation cache for ermrl's commands: a program compiled once (a population's training
+iteration: seconds to tens of seconds) is read back from disk by the next process of the same shape.
+
+The CLI turns it on (:func:`enable`) in ``$ERMRL_COMPILE_CACHE``, else in the folder JAX was given
+(``JAX_COMPILATION_CACHE_DIR``), else ``$XDG_CACHE_HOME/ermrl/jax``, else
+``~/.cache/ermrl/jax``, at most :data:`MAX_BYTES`; ``ERMRL_COMPILE_CACHE=off`` turns it off. A folder that cannot be made or written leaves
+it off (a run never fails for its cache), and JAX itself only warns on an entry it cannot read, then compiles.
+Library users call :func:`enable` themselves, or set JAX's own options.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+VARIABLE = "ERMRL_COMPILE_CACHE"
+OFF = ("off", "0", "false", "no", "none", "")
+MAX_BYTES = 2 * 2**30
+"""The cache's size bound: past it, the least recently used programs are removed. Bounded, JAX reads and writes
+its entries under a file lock (the ``filelock`` package), so that processes sharing the folder never read a
+half-written one."""
+
+
+def folder() -> Path | None:
+    """Where the cache lives, from the environment (see the module's docstring); None when it is turned off."""
+    raw = os.environ.get(VARIABLE)
+    if raw is not None:
+        return None if raw.strip().lower() in OFF else Path(raw).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "ermrl" / "jax"
+
+
+def enable(path: Path | None = None) -> Path | None:
+    """Turns the cache on in ``path`` (default :func:`folder`) and returns it; None, leaving JAX's settings as they
+    are, when it is off or the folder cannot be written. Without ``path`` and ``$ERMRL_COMPILE_CACHE``, a cache
+    folder already given to JAX (``JAX_COMPILATION_CACHE_DIR``) is kept as it is, and returned."""
+    import jax
+
+    if path is None and VARIABLE not in os.environ and jax.config.jax_compilation_cache_dir:
+        return Path(jax.config.jax_compilation_cache_dir)
+    path = folder() if path is None else Path(path)
+    if path is None:
+        return None
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".ermrl-write-check-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError:
+        return None
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    jax.config.update("jax_compilation_cache_max_size", MAX_BYTES)  # least recently used entries go; locked
+    return path
