@@ -248,11 +248,15 @@ def check_folder(path: Path | str, flag: str = "--out") -> Path:
 def cannot_write(folder: Path) -> str | None:
     """Why nothing can be created in ``folder``, else None. Tried for real (an empty folder made and removed):
     permission bits do not bind root, and a read-only mount or a pseudo file system refuses anyone."""
+    made = None
     try:
-        os.rmdir(tempfile.mkdtemp(prefix=".ermrl-check-", dir=folder))
+        made = tempfile.mkdtemp(prefix=".ermrl-check-", dir=folder)
     except OSError as e:
         reason = e.strerror or type(e).__name__
         return reason[0].lower() + reason[1:]
+    finally:  # also when SIGTERM (SystemExit) comes in between
+        if made is not None:
+            os.rmdir(made)
     return None
 
 

@@ -41,13 +41,14 @@ def enable(path: Path | None = None) -> Path | None:
     path = folder() if path is None else Path(path)
     if path is None:
         return None
+    probe = path / f".ermrl-write-check-{os.getpid()}"
     try:
         path.mkdir(parents=True, exist_ok=True)
-        probe = path / f".ermrl-write-check-{os.getpid()}"
         probe.write_bytes(b"")
-        probe.unlink()
     except OSError:
         return None
+    finally:
+        probe.unlink(missing_ok=True)
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     jax.config.update("jax_compilation_cache_max_size", MAX_BYTES)  # least recently used entries go; locked

@@ -20,6 +20,8 @@ CASES = [
     ("train --sr nan", "ermrl train: error: --sr must be positive and finite, got [nan]"),
     ("train --sr inf", "ermrl train: error: --sr must be positive and finite, got [inf]"),
     ("train --iss -1", "ermrl train: error: --iss must be positive and finite, got [-1.0]"),
+    ("train --iss 1e38", "ermrl train: error: --iss must be <= 1e+06 (the reservoir's float32 sums stay finite), got "
+                         "[9.999999680285692e+37]"),
     ("train --lr 0", "ermrl train: error: --lr must be positive and finite, got [0.0]"),
     ("train --env CartPolee-v1", "ermrl train: error: unknown env id 'CartPolee-v1': Gymnasium has no "
                                  "'CartPolee-v1'; did you mean CartPole-v1, CartPole-v0, CartPoleNoVel-v1?"),

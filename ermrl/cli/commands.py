@@ -112,6 +112,8 @@ MAX_SEED = 2**31 - 1
 """The largest agent seed: seeds are int32 in a population."""
 MAX_SAMPLER_SEED = 2**32 - 1
 MAX_RANDOM_EPISODES = 1_000_000
+MAX_SCALE = 1e6
+"""The largest spectral radius or input scaling a reservoir takes."""
 
 
 # -- train and plot --------------------------------------------------------------------------------------
@@ -133,6 +135,10 @@ def _check_phi(phi) -> None:
             raise ConfigError(f"--{name} must be positive and finite, got {v.tolist()}")
     if np.any(phi.lr > 1):
         raise ConfigError(f"--lr (leak rate) must be in (0, 1], got {phi.lr.tolist()}")
+    for name, v in (("sr", phi.sr), ("iss", phi.iss)):
+        if np.any(v > MAX_SCALE):
+            raise ConfigError(f"--{name} must be <= {MAX_SCALE:g} (the reservoir's float32 sums stay finite), got "
+                              f"{v.tolist()}")
 
 
 def cmd_train(args) -> int:

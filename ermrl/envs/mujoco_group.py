@@ -90,7 +90,7 @@ class MujocoGroup:
         """(size,) float64 rewards of the last ``step``, before the packed array's float32 cast (diagnostics)."""
         self.last_final_obs = np.zeros((size, self.obs_dim))
         """(size, obs_dim) float64 raw observations reached by the last ``step``, before any reset (diagnostics)."""
-        self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="mujoco-group") if self.threads > 1 else None
+        self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="mujoco-group") if self.threads > 1 else None
 
     @property
     def action_space(self):
@@ -119,13 +119,16 @@ class MujocoGroup:
             self._gather(i)
 
     def _physics(self, slots: np.ndarray, actions: np.ndarray) -> None:
+        """Steps ``slots`` in ``threads`` contiguous chunks: the pool's threads take all but the last, which this
+        thread steps meanwhile (one hand-over fewer per step)."""
         if self._pool is None or len(slots) < 2:
             self._step_chunk(slots, actions)
             return
         chunks = min(self.threads, len(slots))
-        bounds = np.linspace(0, len(slots), chunks + 1).astype(int)
+        bounds = [len(slots) * k // chunks for k in range(chunks + 1)]
         futures = [self._pool.submit(self._step_chunk, slots[a:b], actions[a:b])
-                   for a, b in zip(bounds[:-1], bounds[1:])]
+                   for a, b in zip(bounds[:-2], bounds[1:-1])]
+        self._step_chunk(slots[bounds[-2]:], actions[bounds[-2]:])
         for future in futures:
             future.result()
 
@@ -190,7 +193,8 @@ class MujocoGroup:
         reset at once without a seed, continuing the slot's generator. Non-finite actions are replaced by 0."""
         if any(rng is None for rng in self._rngs):
             raise RuntimeError("MujocoGroup.step before reset() or restore()")
-        actions = np.nan_to_num(actions, nan=0.0, posinf=0.0, neginf=0.0)
+        if not np.isfinite(actions).all():  # a diverged policy: the simulator survives, training reports it
+            actions = np.nan_to_num(actions, nan=0.0, posinf=0.0, neginf=0.0)
         if actions.shape != (self.size, self.nu):
             raise ValueError(f"actions of shape {actions.shape}; expected {(self.size, self.nu)}")
         slots = np.arange(self.size)
