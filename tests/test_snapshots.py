@@ -70,6 +70,7 @@ CASES = [  # 3 seeds: a population padded (on 2 devices) and resumed with its pa
     pytest.param("CartPoleNoVel-v1", "jax", 0, 1, SB3_DEFAULTS, [3, 4, 5], id="cartpole-jax"),
     pytest.param("LunarLanderNoVel-v3", "host", 0, 2, TINY, [3, 4, 5], id="lunarlander-in-process"),
     pytest.param("Swimmer-v5", "host", 2, 1, TINY, [3, 4], id="swimmer-2-workers"),
+    pytest.param("Hopper-v5", "mujoco", 0, 1, TINY, [3, 4], id="hopper-mujoco"),  # batched, terminations replayed
 ]
 
 
