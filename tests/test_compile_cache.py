@@ -51,3 +51,7 @@ def test_where_the_cache_lives_and_when_it_is_off(tmp_path, monkeypatch):
     monkeypatch.setenv(compile_cache.VARIABLE, "/proc/ermrl/cache")  # no one can create anything there
     assert compile_cache.enable() is None
     assert not (tmp_path / "xdg").exists()
+    existing = tmp_path / "cache"
+    assert compile_cache._writable(existing) and existing.is_dir() and not list(existing.iterdir())  # made once
+    before = existing.stat().st_mtime_ns
+    assert compile_cache._writable(existing) and existing.stat().st_mtime_ns == before  # then only asked
