@@ -27,7 +27,7 @@ def normalized_test_scores(rows_by_env: dict[str, list[dict]], random_returns: d
         if ppo["final_mean"] == rnd:
             continue
         for r in rows:
-            if r["model"] == "PPO (full observation)" or "per_seed" not in r:  # per_seed: storage.TEST_SUMMARY_EXTRA
+            if r["model"] == "PPO (full observation)" or "per_seed" not in r:  # per_seed: summary_schema.TEST_SUMMARY_EXTRA
                 continue
             x = np.array([np.nan if v is None else v for v in r["per_seed"]], float)
             kind = "PPO" if r.get("kind") == "PPO" else r["model"].split(" (")[0]

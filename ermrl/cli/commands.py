@@ -184,7 +184,7 @@ def cmd_train(args) -> int:
     storage.check_folder(storage.check_rerun_folder(out, "train"))
 
     # with --out, a stopped run resumes from OUT.snapshot when run again (written every few minutes)
-    snapshot = _own_snapshot(Path(f"{out}.snapshot")) if args.out else None
+    snapshot = common.own_snapshot(Path(f"{out}.snapshot")) if args.out else None
     with TrainingBar(f"{args.env} × {args.seeds} seeds", enabled=not args.quiet) as bar:
         results = Trainer(config).run(population, bar.update, snapshot=snapshot, snapshot_every_s=args.snapshot_every,
                                       log=print)
@@ -211,34 +211,6 @@ def cmd_train(args) -> int:
     if args.tensorboard is not None:
         print(f"TensorBoard: tensorboard --logdir {args.tensorboard}")
     return 0
-
-
-def _check_memory(train_config, agents: int, what: str) -> None:
-    """:func:`ermrl.training.memory.check` of ``agents`` agents trained with ``train_config`` on its env."""
-    from ermrl import envs
-    from ermrl.training import memory
-
-    info = envs.describe(train_config.env_id, train_config.backend)
-    memory.check(train_config, agents, info.obs_dim, info.action.feature_dim, what)
-
-
-def _own_snapshot(path: Path) -> Path:
-    """``path`` if it is free or holds a training snapshot (which the run may resume from, then replaces and
-    removes); ConfigError before any work when something else is there, so that it is never overwritten."""
-    from ermrl.training import snapshots
-
-    if path.is_dir() or path.exists() and not _is_snapshot(path, snapshots):
-        raise ConfigError(f"{path} is in the way: the run keeps its snapshot there, and it is not one (or is "
-                          "damaged); move it away or give another --out")
-    return path
-
-
-def _is_snapshot(path: Path, snapshots) -> bool:
-    try:
-        snapshots.read_any(path)
-    except Exception:  # another format, or damaged: zipfile, NumPy, JSON or key errors
-        return False
-    return True
 
 
 def cmd_plot(args) -> int:
@@ -345,7 +317,8 @@ def cmd_select(args) -> int:
     check_writable(common.storage_url(args))  # the selection is recorded in the study
     config = storage.decode_study_record(study.user_attrs[ATTR])
     for env_id in config.env_ids:
-        _check_memory(config.train_for(env_id), min(args.top, len(study.trials)) * args.seeds, "the selection")
+        common.check_memory(config.train_for(env_id), min(args.top, len(study.trials)) * args.seeds,
+                            "the selection")
     ranked = ranked_trials(study)
     tied = ties_at_cut(ranked, args.top)
     if tied:
@@ -389,8 +362,8 @@ def cmd_test(args) -> int:
         envs.describe(test.env_id)  # an unknown id or a missing simulator, before opening the study
     study = load_study(common.storage_url(args), args.study)
     config = storage.decode_study_record(study.user_attrs[ATTR])
-    _check_memory(config.train_for(test.env_id or config.env_ids[0]), test.seeds * max(1, len(test.ermrl_lrs)),
-                  "the test phase")
+    tested = config.train_for(test.env_id or config.env_ids[0])
+    common.check_memory(tested, test.seeds * max(1, len(test.ermrl_lrs)), "the test phase")
     out = storage.check_folder(test_dir(common.run_dir(args), study.user_attrs[ATTR], test.env_id))
     progress, close = common.bars(args.quiet)
     models: list = []  # (label, Results) of every model, for TensorBoard
@@ -442,7 +415,7 @@ def cmd_baselines(args) -> int:
     if args.random_episodes > MAX_RANDOM_EPISODES:
         raise ConfigError(f"--random-episodes must be <= {MAX_RANDOM_EPISODES:,}, got {args.random_episodes}")
     for env_id in args.env:
-        _check_memory(options.train_config(args, env_id, 0), args.seeds, "the PPO baseline")
+        common.check_memory(options.train_config(args, env_id, 0), args.seeds, "the PPO baseline")
     ppo = options.ppo_config(args)
     lr = ppo.learning_rate
     progress, close = common.bars(args.quiet)

@@ -21,7 +21,8 @@ def study_location(p, required: bool = True) -> None:
     p.add_argument("--study", required=required, default=None,
                    help="study name, as given to or printed by `ermrl evolve`" + ("" if required else
                                                                                    " (default ENV-Kres-STEPSk)"))
-    p.add_argument("--storage", type=options.storage, default=None, help="Optuna storage URL or journal file (default sqlite in runs/STUDY)")
+    p.add_argument("--storage", type=options.storage, default=None,
+                   help="Optuna storage URL or journal file (default sqlite in runs/STUDY)")
     p.add_argument("--out", type=options.path, default=None, help="run folder (default runs/STUDY)")
 
 
@@ -113,3 +114,23 @@ def busy_note(load: float | None = None, cores: int | None = None) -> str | None
         return None
     return (f"note: the machine looks busy (load average {load:.1f} on {cores} cores); the estimate assumes free "
             "cores, and training beside another job can take several times longer")
+
+
+def check_memory(train_config, agents: int, what: str) -> None:
+    """:func:`ermrl.training.memory.check` of ``agents`` agents trained with ``train_config`` on its env."""
+    from ermrl import envs
+    from ermrl.training import memory
+
+    info = envs.describe(train_config.env_id, train_config.backend)
+    memory.check(train_config, agents, info.obs_dim, info.action.feature_dim, what)
+
+
+def own_snapshot(path: Path) -> Path:
+    """``path`` if it is free or holds a training snapshot (which the run may resume from, then replaces and
+    removes); ConfigError before any work when something else is there, so that it is never overwritten."""
+    from ermrl.training import snapshots
+
+    if path.is_dir() or path.exists() and not snapshots.is_snapshot(path):
+        raise ConfigError(f"{path} is in the way: the run keeps its snapshot there, and it is not one (or is "
+                          "damaged); move it away or give another --out")
+    return path

@@ -86,30 +86,29 @@ def storage(value: str) -> str:
     return value
 
 
-def threads(value: str):
-    """argparse type of --env-threads: 'auto' or an integer in 1..4096."""
+def _auto_or_count(value: str, low: int, high: int | None = None):
+    """``value`` as 'auto' or an integer in [low, high] (no upper bound when ``high`` is None); else the
+    ArgumentTypeError that names the range."""
     if value == "auto":
         return value
     try:
         n = int(value)
     except ValueError:
-        n = 0
-    if not 1 <= n <= 4096:
-        raise argparse.ArgumentTypeError(f"must be 'auto' or an integer in 1..4096, got {value!r}")
+        n = None
+    if n is None or n < low or (high is not None and n > high):
+        shown = f"in {low}..{high}" if high is not None else f">= {low}"
+        raise argparse.ArgumentTypeError(f"must be 'auto' or an integer {shown}, got {value!r}")
     return n
+
+
+def threads(value: str):
+    """argparse type of --env-threads: 'auto' or an integer in 1..4096."""
+    return _auto_or_count(value, 1, 4096)
 
 
 def workers(value: str):
     """argparse type of --env-workers: 'auto' or an integer >= 0."""
-    if value == "auto":
-        return value
-    try:
-        n = int(value)
-    except ValueError:
-        n = -1
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"must be 'auto' or an integer >= 0, got {value!r}")
-    return n
+    return _auto_or_count(value, 0)
 
 
 def _groups() -> dict[str, list[Option]]:

@@ -104,6 +104,15 @@ def read(path: Path, ident: dict) -> Snapshot | None:
     return snap if kept == ident else None
 
 
+def is_snapshot(path: Path) -> bool:
+    """Whether the file at ``path`` is a readable training snapshot of this ermrl, of any identity."""
+    try:
+        read_any(path)
+    except Exception:  # another format, or damaged: zipfile, NumPy, JSON or key errors
+        return False
+    return True
+
+
 def read_any(path: Path) -> tuple[dict, Snapshot]:
     """(identity, snapshot) of the file at ``path`` whatever its identity, e.g. to look at a run in progress.
     Raises ValueError for a file of another format or version, and whatever NumPy raises for a damaged one."""
