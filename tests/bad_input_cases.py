@@ -7,6 +7,10 @@ SQLITE = "sqlite:///studies.db"
 
 CASES = [
     # -- train: numbers, env ids, flags, paths --------------------------------------------------------------
+    ("train --timestep 1000", "ermrl train: error: unrecognized arguments: --timestep 1000 (did you mean "
+                              "--timesteps?); see `ermrl train --help`"),  # an abbreviation is refused, not expanded
+    ("evolve --until-conv", "ermrl evolve: error: unrecognized arguments: --until-conv (did you mean "
+                            "--until-converged?); see `ermrl evolve --help`"),
     ("train --units 0", "ermrl train: error: units must be >= 1, got 0; a reservoir needs at least one neuron"),
     ("train --units -5", "ermrl train: error: units must be >= 1, got -5; a reservoir needs at least one neuron"),
     ("train --units abc", "ermrl train: error: argument --units: invalid int value: 'abc'; see `ermrl train --help`"),
@@ -165,6 +169,14 @@ CASES = [
                            "generation), got 1"),
     ("evolve --popsize -3", "ermrl evolve: error: --popsize must be >= 2 (CMA-ES needs at least 2 candidates a "
                             "generation), got -3"),
+    ("evolve --converged-width 0", "ermrl evolve: error: --converged-width must be in (0, 10] decades, got 0.0"),
+    ("evolve --converged-generations 0", "ermrl evolve: error: --converged-generations must be in 1..1000, got 0"),
+    ("evolve --until-converged --sampler random", "ermrl evolve: error: --until-converged reads CMA-ES's search "
+     "distribution; --sampler random has none (use --sampler cmaes, or stop at --trials)"),
+    (f"convergence --study one --storage {SQLITE}", "ermrl convergence: error: study 'one' holds no CMA-ES search "
+     "distribution yet (it needs 2 generations told); evolve it further first"),
+    (f"convergence --study one --storage {SQLITE} --converged-width -1",
+     "ermrl convergence: error: --converged-width must be in (0, 10] decades, got -1.0"),
     ("evolve --sampler-seed -1", "ermrl evolve: error: --sampler-seed must be in 0..4294967295 (NumPy's seeds), got -1"),
     ("evolve --sampler-seed 100000000000000000000",
      "ermrl evolve: error: --sampler-seed must be in 0..4294967295 (NumPy's seeds), got 100000000000000000000"),
@@ -339,8 +351,7 @@ CASES = [
      "ermrl experiment: error: --test-agents-per-run must be >= 1, got 0"),
     ("experiment run partial-observability --scale huge",
      "ermrl experiment: error: argument --scale: invalid choice: 'huge' (choose from 'smoke', 'small', 'medium', "
-     "'paper'); see "
-     "`ermrl experiment run --help`"),
+     "'converged', 'paper'); see `ermrl experiment run --help`"),
     ("experiment run partial-observability --only cartpole1res",
      "ermrl experiment: error: experiment partial-observability has no study 'cartpole1res'; its studies: "
      "cartpole-1res, cartpole-2res, lunarlander-1res, lunarlander-2res, pendulum-1res, pendulum-2res; did you mean "
@@ -423,6 +434,6 @@ CASES = [
                                            "for any free port"),
     ("", "ermrl: error: the following arguments are required: COMMAND; see `ermrl --help`"),
     ("trian --units 5", "ermrl: error: argument COMMAND: invalid choice: 'trian' (choose from 'train', 'evolve', "
-                        "'select', 'test', 'report', 'plot', 'baselines', 'experiment', 'analyze', 'video', "
-                        "'dashboard'); see `ermrl --help`"),
+                        "'select', 'test', 'report', 'plot', 'baselines', 'experiment', 'analyze', 'convergence', "
+                        "'video', 'dashboard'); see `ermrl --help`"),
 ]

@@ -126,3 +126,16 @@ def test_output_paths_are_checked_before_any_training(tmp_path):
         r = ermrl(*args, "--timesteps", "2048") if args[0] != "experiment" else ermrl(*args)
         assert r.returncode == 2 and r.stderr == message + "\n", r.stderr
     assert afile.read_text() == "keep me" and set(tmp_path.iterdir()) == {afile, locked}  # nothing created
+
+
+def test_python_m_ermrl_is_the_ermrl_command():
+    import subprocess
+    import sys
+
+    import ermrl as package
+
+    run = subprocess.run([sys.executable, "-m", "ermrl", "--version"], capture_output=True, text=True, timeout=120)
+    assert (run.returncode, run.stdout) == (0, f"ermrl {package.__version__}\n")
+    run = subprocess.run([sys.executable, "-m", "ermrl", "train", "--timestep", "1000"], capture_output=True,
+                         text=True, timeout=120)
+    assert run.returncode == 2 and "unrecognized arguments: --timestep 1000 (did you mean --timesteps?)" in run.stderr

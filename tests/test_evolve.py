@@ -97,8 +97,8 @@ def test_three_batches_without_a_completed_trial_stop_the_run_with_a_reason(tmp_
             study.enqueue_trial({"sr": 1.0, "lr": 5.0, "iss": 1.0})
         with pytest.raises(RunFailed) as e:
             evolve(study, config)
-    assert str(e.value) == ("3 batches in a row had no completed trial; see the trials' 'failure' attributes "
-                            "(`ermrl report`), fix the cause, then rerun to resume")
+    assert str(e.value) == ("3 batches in a row of study 's' had no completed trial; see the trials' 'failure' "
+                            "attributes (`ermrl report`), fix the cause, then rerun to resume")
     assert [(t.state, t.user_attrs["failure"]) for t in study.trials] == \
         [(TrialState.FAIL, "diverged (NaN/inf) on 2 of 2 seeds")] * 6
 

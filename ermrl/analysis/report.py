@@ -275,6 +275,34 @@ def analysis_section(run_dir: Path, out_dir: Path) -> list[str]:
     return parts
 
 
+def spread_section(study: optuna.Study, record: dict, run_dir: Path) -> list[str]:
+    """HTML of the Φ spread per generation (CMA-ES studies with a stored search distribution), the stop of the
+    study's recorded convergence rule (else of the default rule) marked: ``phi_spread.png`` in run_dir."""
+    from ermrl.analysis import spread
+    from ermrl.evolution import convergence
+
+    from ermrl.evolution.search_space import SearchSpace
+
+    if record.get("sampler") != "cmaes" or not {"search_space", "reservoirs", "popsize"} <= set(record):
+        return []
+    space = SearchSpace.from_dict(record["reservoirs"], record["search_space"])
+    trials = study.get_trials(deepcopy=False)
+    dists = convergence.centers_and_spreads(trials, space)
+    if not dists:
+        return []
+    stopped = convergence.recorded(study)
+    rule = convergence.Convergence(stopped["width"], stopped["generations"]) if stopped else convergence.Convergence()
+    verdict = convergence.judge(study, space, record["popsize"], rule, trials)
+    where = ("not reached" if verdict.generation is None else
+             f"generation {verdict.generation}, {verdict.trials} of {len(completed(study))} completed trials")
+    fig = spread.figure(dists, rule, verdict.generation, f"{study.study_name}: Φ spread per generation",
+                        run_dir / "phi_spread.png")
+    return ["<h2>&Phi; spread per generation</h2>",
+            f"<p>the standard deviation, in decades, of the distribution CMA-ES sampled each generation from; the "
+            f"rule {'the study stopped by' if stopped else 'of <code>--until-converged</code>'} ({html.escape(rule.describe())}): "
+            f"{where}</p>", _img(fig, "Φ spread per generation")]
+
+
 def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | None = None) -> Path:
     """Writes ``<run_dir>/report.html`` (or ``out``), with fitness_over_trials.png and hp_map.png beside it in
     run_dir. Results come first (best and selected Φ, test phases with their statistics, the analyses found in
@@ -293,6 +321,11 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
                      [[len(done), len(bad), len(study.trials), len(generations), _hms(running), _hms(span)]])]
     if not done:
         parts.append('<p class="warn">no completed trial yet</p>')
+    stopped = study.user_attrs.get("converged")
+    if isinstance(stopped, dict) and stopped.get("generation") is not None:
+        parts.append(f"<p>stopped: CMA-ES converged at generation {stopped['generation']} ({stopped['trials']} "
+                     f"trials), every parameter's spread below {stopped['width']:g} decades for "
+                     f"{stopped['generations']} generations in a row</p>")
 
     if best:
         t = best[0]
@@ -323,6 +356,7 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
     parts += ["<h2>Fitness over trials</h2>",
               _img(fitness_over_trials(study, run_dir / "fitness_over_trials.png"), "fitness over trials"),
               "<h2>HP map</h2>", _img(hp_map(study, run_dir / "hp_map.png"), "HP map")]
+    parts += spread_section(study, cfg, run_dir)
     if bad:
         parts += ["<h2>Failed trials</h2>", _table(["trial", "generation", "reason"], [
             [t.number, t.user_attrs.get("generation", ""), str(t.user_attrs.get("failure", ""))] for t in bad])]

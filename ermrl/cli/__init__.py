@@ -18,7 +18,7 @@ from ermrl.errors import TERMINATED, ConfigError, RunFailed, raise_terminated
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from ermrl.cli import analyze, commands, dashboard, experiment, video
+    from ermrl.cli import analyze, commands, convergence, dashboard, experiment, video
 
     parser = OneLineErrorParser(
         prog="ermrl", description="Evolving Reservoirs for Meta Reinforcement Learning (ER-MRL), vectorized in JAX.",
@@ -29,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands.add_parsers(sub, formatter)
     experiment.add_parser(sub, formatter)
     analyze.add_parser(sub, formatter)
+    convergence.add_parser(sub, formatter)
     video.add_parser(sub, formatter)
     dashboard.add_parser(sub, formatter)
     _add_debug(parser)
@@ -37,7 +38,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 class OneLineErrorParser(argparse.ArgumentParser):
     """argparse's parser, whose errors (unknown flag, bad int, bad choice, missing argument) are a ConfigError:
-    one line naming the problem and pointing at the command's --help, no usage block; ``main`` exits 2."""
+    one line naming the problem and pointing at the command's --help, no usage block; ``main`` exits 2. A flag
+    must be given whole: ``--timestep`` is refused, not read as ``--timesteps``."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         raise ConfigError(f"{message}; see `{self.prog} --help`")
@@ -158,10 +164,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(argv: list[str] | None) -> int:
-    from ermrl.cli import analyze, commands, dashboard, experiment, video
+    from ermrl.cli import analyze, commands, convergence, dashboard, experiment, video
 
     argv = list(sys.argv[1:] if argv is None else argv)
     handlers = {**commands.COMMANDS, "experiment": experiment.run_command, "analyze": analyze.run_command,
+                "convergence": convergence.cmd_convergence,
                 "video": video.run_command, "dashboard": dashboard.run_command}
     words = [a for a in argv if not a.startswith("-")]
     command = f"ermrl {words[0]}" if words and words[0] in handlers else "ermrl"

@@ -45,7 +45,7 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--env", action="append", default=None, metavar="ID",
                    help="env id; repeat for a fitness over several envs (default CartPoleNoVel-v1)")
     p.add_argument("--seeds", type=int, default=3, help="seeds per trial; its fitness is their mean")
-    options.add_options(p, "env", "agent", "ppo", "search", "workers")
+    options.add_options(p, "env", "agent", "ppo", "search", "workers", "convergence")
     p.add_argument("--baselines", type=options.path, default=None, metavar="TABLE",
                    help="baselines table (default runs/baselines.json over the shipped one); several envs only")
     p.add_argument("--allow-weak-baselines", action="store_true",
@@ -257,7 +257,8 @@ def cmd_evolve(args) -> int:
                           trials=args.trials, seeds=args.seeds, sampler=args.sampler, popsize=args.popsize,
                           sampler_seed=args.sampler_seed, envs=env_ids if len(env_ids) > 1 else (),
                           normalization=args.normalization, seed_schedule=args.seed_schedule)
-    worker = WorkerConfig(args.batch, args.worker_index, args.heartbeat_interval, args.grace_period)
+    worker = WorkerConfig(args.batch, args.worker_index, args.heartbeat_interval, args.grace_period,
+                          options.convergence_rule(args))
     agents = min(worker.batch or config.generation_size, config.trials) * config.seeds  # trained at once, per env
     for env_id, info in zip(env_ids, infos):
         memory.check(config.train_for(env_id), agents, info.obs_dim, info.action.feature_dim, "a generation")
@@ -284,17 +285,23 @@ def cmd_evolve(args) -> int:
     print(f"study {name!r} in {shown_url(storage_url)}: {done}/{args.trials} trials done, "
           f"{config.generation_size} per generation × {args.seeds} seeds × {args.timesteps:,} steps"
           + (f" on {len(env_ids)} envs" if config.normalized else ""))
+    if worker.until_converged is not None and (stop := _converged(study, config, worker.until_converged)):
+        print(stop + "; nothing to do (give a smaller --converged-width or more --converged-generations to go on)")
+        return 0
     trainers = make_trainers(config)
     if done < args.trials and not args.no_estimate:
         batch = min(worker.batch or config.generation_size, args.trials - done)
         eta = estimate_seconds(trainers, config, args.trials - done, batch)
-        print(f"estimated time: {eta / 60:.1f} min ({-(-(args.trials - done) // batch)} "
+        print(f"estimated time{' (at most; convergence may stop it sooner)' if worker.until_converged else ''}: "
+              f"{eta / 60:.1f} min ({-(-(args.trials - done) // batch)} "
               + ("generations" if batch == config.generation_size else f"batches of {batch} trials, for this worker "
                  "alone") + ", from one measured iteration per env)")
         if eta >= 60 and (note := common.busy_note()):
             print(note)
     with EvolutionBar(args.trials, config.generation_size, len(env_ids), enabled=not args.quiet) as bar:
         evolve(study, config, trainers, bar.update, worker, lambda line: print(line, flush=True))
+    if worker.until_converged is not None and (stop := _converged(study, config, worker.until_converged)):
+        print(stop)
     best = study.best_trial
     print(f"best fitness {best.value:.4g} at trial {best.number}: "
           + ", ".join(f"{k} {v:.4g}" for k, v in best.params.items()))
@@ -304,6 +311,19 @@ def cmd_evolve(args) -> int:
     print(f"next: ermrl select --study {name}{common.storage_flag(args)} ; ermrl test --study {name}{common.storage_flag(args)} ; "
           f"ermrl report --study {name}{common.storage_flag(args)}")
     return 0
+
+
+def _converged(study, config, rule) -> str | None:
+    """'study NAME converged at generation G (N trials): RULE', or None while it has not."""
+    from ermrl.evolution import convergence
+
+    verdict = convergence.judge(study, config.space, config.generation_size, rule)
+    if verdict.generation is None:
+        return None
+    if convergence.recorded(study, rule) is None:
+        convergence.record(study, rule, verdict)
+    return (f"study {study.study_name!r} converged at generation {verdict.generation} ({verdict.trials} trials): "
+            f"{rule.describe()}")
 
 
 def cmd_select(args) -> int:

@@ -13,7 +13,7 @@ def add_parser(sub, formatter) -> None:
 
     p = sub.add_parser("experiment", help="the paper's experiments by name: list them, or run one at a scale",
                        description="`ermrl experiment list` names every experiment of the paper and its appendix; "
-                                   "`ermrl experiment run NAME --scale smoke|small|paper` runs its evolutions, "
+                                   "`ermrl experiment run NAME --scale smoke|small|medium|converged|paper` runs its evolutions, "
                                    "selections, test phases and one combined report. Rerunning resumes.",
                        formatter_class=formatter)
     esub = p.add_subparsers(dest="experiment_command", required=True, metavar="list|run")
@@ -21,9 +21,10 @@ def add_parser(sub, formatter) -> None:
     lst.add_argument("--config", type=options.path, default=None, help=argparse_hidden())
     run = esub.add_parser("run", help="run (or resume) one experiment", formatter_class=formatter)
     run.add_argument("name", help="experiment name (see `ermrl experiment list`)")
-    run.add_argument("--scale", default="small", choices=["smoke", "small", "medium", "paper"],
+    run.add_argument("--scale", default="small", choices=["smoke", "small", "medium", "converged", "paper"],
                      help="budgets: smoke (seconds a study, for tests), small (a first answer here), medium (the "
-                          "paper's trial budget, 60 trials), paper (`ermrl experiment list` gives each one's numbers)")
+                          "paper's trial budget, 60 trials), converged (the paper's trial budget until CMA-ES has "
+                          "converged, at most 900 trials), paper (`ermrl experiment list` gives each one's numbers)")
     run.add_argument("--only", nargs="+", default=(), metavar="STUDY", help="run only these studies of the experiment")
     run.add_argument("--storage", type=options.storage, default=None,
                      help="Optuna storage URL or journal file for every study (default a journal file in the folder)")
@@ -73,6 +74,8 @@ def _study_label(spec) -> str:
 
 
 def _run(args) -> int:
+    import dataclasses
+
     import optuna
 
     from ermrl import envs, storage
@@ -113,7 +116,7 @@ def _run(args) -> int:
     for p in plans:
         try:
             study = optuna.load_study(study_name=p.study, storage=make_storage(url))
-            done[p.study] = len(study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,)))
+            done[p.study] = runner.trials_done(p, study)
             left[p.study] = runner.tests_left(p, study)
             if not runner.selection_left(p, study):
                 unselected.discard(p.study)
@@ -126,7 +129,15 @@ def _run(args) -> int:
         seconds = runner.estimate_seconds(plans, done, left, args.baseline_store, budget.agents_per_run, unselected,
                                            table)
         print(f"estimated time: {seconds / 60:.0f} min (rough: nominal throughput, "
-              f"{_count(sum(done.values()), 'trial')} and {_count(finished, 'test phase')} already done)")
+              f"{_count(sum(done.values()), 'trial')} and {_count(finished, 'test phase')} already done)"
+              + (" if every study runs to its trial limit" if scale.until_converged else ""))
+        if scale.until_converged:
+            typical = [dataclasses.replace(p, config=dataclasses.replace(
+                p.config, trials=min(p.config.trials, registry.CONVERGED_TRIALS))) for p in plans]
+            seconds = runner.estimate_seconds(typical, done, left, args.baseline_store, budget.agents_per_run,
+                                               unselected, table)
+            print(f"  about {seconds / 60:.0f} min if each study converges after about {registry.CONVERGED_TRIALS} "
+                  "trials, as the paper's 900-trial CartPoleNoVel study did")
         if seconds >= 60 and (note := busy_note()):
             print(note)
 

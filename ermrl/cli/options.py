@@ -115,6 +115,7 @@ def _groups() -> dict[str, list[Option]]:
     """The option groups; imported lazily so that ``ermrl --help`` does not import JAX."""
     from ermrl.agent import AgentConfig
     from ermrl.evolution.config import EvolveConfig
+    from ermrl.evolution.convergence import Convergence
     from ermrl.evolution.search_space import SearchSpace
     from ermrl.evolution.workers import WorkerConfig
     from ermrl.experiments.evaluation import TestConfig
@@ -177,6 +178,13 @@ def _groups() -> dict[str, list[Option]]:
                     Option("--worker-index", WorkerConfig, "worker_index", kwargs={"type": int}),
                     Option("--heartbeat-interval", WorkerConfig, "heartbeat_interval", kwargs={"type": int}),
                     Option("--grace-period", WorkerConfig, "grace_period", kwargs={"type": int})],
+        "convergence": [
+            Option("--until-converged", help="also stop once CMA-ES has converged: every searched parameter's spread "
+                   "(the search distribution's standard deviation, in decades) below --converged-width for "
+                   "--converged-generations generations in a row; recorded in the study. CMA-ES only.",
+                   kwargs={"action": "store_true"}),
+            Option("--converged-width", Convergence, "width", kwargs={"type": float, "metavar": "DECADES"}),
+            Option("--converged-generations", Convergence, "generations", kwargs={"type": int, "metavar": "G"})],
         "test": [Option("--seeds", TestConfig, "seeds", kwargs={"type": int}),
                  Option("--timesteps", TestConfig, "timesteps", kwargs={"type": int}),
                  Option("--ermrl-lr", TestConfig, "ermrl_lrs", kwargs={"type": float, "nargs": "+", "default": None}),
@@ -233,6 +241,20 @@ def add_config_option(parser: argparse.ArgumentParser) -> None:
 
 
 # -- building configs from parsed options -------------------------------------------------------------
+
+
+def convergence_rule(args):
+    """The Convergence of ``--until-converged`` (None without it); ConfigError for a sampler without generations
+    of a search distribution."""
+    from ermrl.evolution.convergence import Convergence
+
+    rule = Convergence(args.converged_width, args.converged_generations)  # bad values fail even without the switch
+    if not args.until_converged:
+        return None
+    if getattr(args, "sampler", "cmaes") != "cmaes":
+        raise ConfigError(f"--until-converged reads CMA-ES's search distribution; --sampler {args.sampler} has none "
+                          "(use --sampler cmaes, or stop at --trials)")
+    return rule
 
 
 def agent_config(args, reservoirs: int | None = None):

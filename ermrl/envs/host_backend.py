@@ -96,6 +96,30 @@ def step_seconds(info: EnvInfo, steps: int = 200) -> float:
     return elapsed
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the OS tells it)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def batched_step_seconds(info: EnvInfo, slots: int = 22, threads: int | None = None, steps: int = 40) -> float:
+    """A quick estimate of one env step's host time on the ``mujoco`` backend, in seconds per env: ``slots``
+    envs of a :class:`~ermrl.envs.mujoco_group.MujocoGroup` stepped together on ``threads`` threads (default: every
+    usable core) with random actions."""
+    from ermrl.envs.mujoco_group import MujocoGroup
+
+    threads = usable_cores() if threads is None else threads
+    group = MujocoGroup(info.base_id, info.kept_dims, False, 0, slots, threads=min(threads, slots))
+    group.reset(np.arange(slots))
+    space = group.action_space
+    actions = np.random.default_rng(0).uniform(space.low, space.high, size=(steps, slots, space.shape[0]))
+    t = time.perf_counter()
+    for a in actions:
+        group.step(a)
+    elapsed = (time.perf_counter() - t) / (steps * slots)
+    group.close()
+    return elapsed
+
+
 class HostEnv:
     """The Gymnasium envs of one population, stepped all at once from the host loop.
 
@@ -132,8 +156,7 @@ class HostEnv:
         if self.batched:
             from ermrl.envs.mujoco_group import MujocoGroup
 
-            cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-            threads = cores if self.threads == "auto" else int(self.threads)
+            threads = usable_cores() if self.threads == "auto" else int(self.threads)
             self.groups = [MujocoGroup(*args, 0, n_slots, threads=min(threads, n_slots))]
             return
         workers = self.resolved_workers(n_slots)

@@ -14,6 +14,7 @@ stopped by Ctrl-C or SIGTERM fails its own trials on the way out ("interrupted")
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
 from typing import Callable
@@ -143,34 +144,84 @@ def make_trainers(config: EvolveConfig) -> dict[str, Trainer]:
 def evolve(study: optuna.Study, config: EvolveConfig, trainers: dict[str, Trainer] | None = None,
            progress_fn: Callable[[GenerationProgress], None] | None = None, worker: WorkerConfig | None = None,
            log: Callable[[str], None] | None = None) -> optuna.Study:
-    """Works on the study until it holds ``config.trials`` completed trials, alone or beside other workers
-    (``worker``: batch, index, heartbeats). Each claimed batch trains every env's population (the batch's Φ ×
-    seeds) before its trials are told. ``log`` receives one line per event: waiting for a generation, a lost
-    worker's trial failed, a trial failed meanwhile."""
-    trainers = trainers or make_trainers(config)
+    """Works on the study until it holds ``config.trials`` completed trials (or has converged by
+    ``worker.until_converged``), alone or beside other workers (``worker``: batch, index, heartbeats). Each
+    claimed batch trains every env's population (the batch's Φ × seeds) before its trials are told. ``log``
+    receives one line per event: waiting for a generation, a lost worker's trial failed, a trial failed meanwhile."""
+    evolve_together([Member(study, config, worker or WorkerConfig())], trainers, progress_fn, log)
+    return study
+
+
+@dataclasses.dataclass(frozen=True)
+class Member:
+    """One study of :func:`evolve_together`, with its evolution's config and this process's worker settings."""
+
+    study: optuna.Study
+    config: EvolveConfig
+    worker: WorkerConfig = WorkerConfig()
+
+
+def shape(config: EvolveConfig) -> tuple:
+    """What studies must share to train as one population: the training config (env, agent shape, PPO settings,
+    budget) and the envs of the fitness."""
+    return config.train, config.env_ids
+
+
+def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None = None,
+                    progress_fn: Callable[[GenerationProgress], None] | None = None,
+                    log: Callable[[str], None] | None = None) -> None:
+    """Works on several studies of one :func:`shape` at once until each is done: every round, each unfinished
+    study claims its next batch (a generation, for a lone worker), the claims of all studies train as ONE
+    population per env, and each study is told its own trials. An agent trains the same inside any population
+    (:mod:`ermrl.training.programs`), so each study's trials are those it gets evolved alone. Progress is
+    reported for the first study of a round."""
+    if len({shape(m.config) for m in members}) > 1:
+        raise ValueError("studies trained together must share their training config and envs")
+    trainers = trainers or make_trainers(members[0].config)
     log = log or (lambda line: None)
-    failed_in_a_row = 0
-    with Worker(study, config, worker or WorkerConfig(), log) as me:
-        while (claim := me.claim()) is not None:
-            population = Population.concat([
-                Population.grid(phi, config.trial_seeds(g), config.train.ppo.learning_rate, config.space.reservoirs)
-                for phi, g in zip(claim.phis, claim.generations)])
+    failed_in_a_row = [0] * len(members)
+    with contextlib.ExitStack() as stack:
+        workers = [stack.enter_context(Worker(m.study, m.config, m.worker, log)) for m in members]
+        active = list(range(len(members)))
+        while True:
+            claims = []
+            for i in list(active):
+                claim = workers[i].claim()
+                if claim is None:
+                    active.remove(i)
+                else:
+                    claims.append((i, claim))
+            if not claims:
+                return
+            parts = [Population.concat([
+                Population.grid(phi, members[i].config.trial_seeds(g), members[i].config.train.ppo.learning_rate,
+                                members[i].config.space.reservoirs) for phi, g in zip(claim.phis, claim.generations)])
+                for i, claim in claims]
+            first, lead = members[claims[0][0]], claims[0][1]
             results = {}
             for env_id, trainer in trainers.items():
                 def report(p: Progress, env_id=env_id):
-                    me.check_terminated()
+                    for w in workers:
+                        w.check_terminated()
                     if progress_fn is not None:
-                        progress_fn(GenerationProgress(claim.generation, env_id, claim.completed, config.trials,
-                                                       *_best(study), p))
+                        progress_fn(GenerationProgress(lead.generation, env_id, lead.completed, first.config.trials,
+                                                       *_best(first.study), p))
 
-                results[env_id] = trainer.run(population, report)
-            done, failed = tell_batch(study, claim.trials, results, config, log)
-            me.finished(claim.trials)
-            failed_in_a_row = failed_in_a_row + 1 if failed and not done else 0
-            if failed_in_a_row >= MAX_FAILED_BATCHES:
-                raise RunFailed(f"{MAX_FAILED_BATCHES} batches in a row had no completed trial; see the trials' "
-                                "'failure' attributes (`ermrl report`), fix the cause, then rerun to resume")
-            if progress_fn is not None:
-                progress_fn(GenerationProgress(claim.generation, config.env_ids[0], count(study, TrialState.COMPLETE),
-                                               config.trials, *_best(study), None))
-    return study
+                results[env_id] = trainer.run(Population.concat(parts), report)
+            at = 0
+            for (i, claim), part in zip(claims, parts):
+                agents = np.arange(at, at + part.size)
+                at += part.size
+                m = members[i]
+                done, failed = tell_batch(m.study, claim.trials, {e: r.select(agents) for e, r in results.items()},
+                                          m.config, log)
+                workers[i].finished(claim.trials)
+                failed_in_a_row[i] = failed_in_a_row[i] + 1 if failed and not done else 0
+                if failed_in_a_row[i] >= MAX_FAILED_BATCHES:
+                    raise RunFailed(f"{MAX_FAILED_BATCHES} batches in a row of study {m.study.study_name!r} had no "
+                                    "completed trial; see the trials' 'failure' attributes (`ermrl report`), fix the "
+                                    "cause, then rerun to resume")
+                if progress_fn is not None and i == claims[0][0]:
+                    progress_fn(GenerationProgress(claim.generation, m.config.env_ids[0],
+                                                   count(m.study, TrialState.COMPLETE), m.config.trials,
+                                                   *_best(m.study), None))

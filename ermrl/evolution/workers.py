@@ -25,7 +25,9 @@ from optuna.trial import FrozenTrial, TrialState
 
 from ermrl.agent import Phi
 from ermrl.errors import TERMINATED, ConfigError, raise_terminated
+from ermrl.evolution import convergence
 from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.convergence import Convergence
 from ermrl.evolution.generations import ATTR, CMA_GENERATION, FULL, Ledger
 from ermrl.evolution.heartbeat import (GRACE_PERIOD_S, INTERRUPTED, INTERVAL_S, WORKER_ATTR, Heartbeat, WorkerId,
                                        fail_lost, fail_trial, optuna_heartbeat)
@@ -67,6 +69,9 @@ class WorkerConfig:
     """Seconds between two heartbeats of the trials this worker trains."""
     grace_period: int = GRACE_PERIOD_S
     """Seconds without a heartbeat after which other workers fail a trial (its worker is gone) and redo it."""
+    until_converged: Convergence | None = None
+    """Also stop once CMA-ES has converged by this rule (:mod:`ermrl.evolution.convergence`), recording it in
+    the study; None: stop at the trial target only."""
 
     def __post_init__(self):
         if self.batch is not None and self.batch < 1:
@@ -194,7 +199,7 @@ class Worker:
             self.check_terminated()
             trials = self._trials()
             completed = sum(t.state == TrialState.COMPLETE for t in trials)
-            if completed >= self.config.trials:
+            if completed >= self.config.trials or self._converged(trials):
                 return None
             running = sum(t.state == TrialState.RUNNING for t in trials)
             need = self.config.trials - completed - running
@@ -211,6 +216,19 @@ class Worker:
                 self.log(f"waiting: {reason}")
                 waiting = reason
             time.sleep(POLL_S)
+
+    def _converged(self, trials: list[FrozenTrial]) -> bool:
+        """Whether the study has converged by ``until_converged`` (recorded in the study and logged once)."""
+        rule = self.worker.until_converged
+        if rule is None or not self.ledger.cma:
+            return False
+        verdict = convergence.judge(self.study, self.config.space, self.config.generation_size, rule, trials)
+        if verdict.generation is None:
+            return False
+        if convergence.recorded(self.study, rule) is None:
+            convergence.record(self.study, rule, verdict)
+            self.log(f"converged at generation {verdict.generation} ({verdict.trials} trials): {rule.describe()}")
+        return True
 
     def _trials(self) -> list[FrozenTrial]:
         """The study's trials, after failing those of workers that are gone."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 
 from ermrl.errors import ConfigError
+from ermrl.evolution.convergence import Convergence
 
 NOVEL = ("CartPoleNoVel-v1", "PendulumNoVel-v1", "LunarLanderNoVel-v3")
 LOCOMOTION = ("Ant-v5", "HalfCheetah-v5", "Swimmer-v5", "Hopper-v5", "Walker2d-v5", "Humanoid-v5", "HumanoidStandup-v5")
@@ -82,6 +83,9 @@ class Scale:
     wiring_only: bool = False
     """Checks the wiring, not the science: PPO baselines that do not beat a random agent are accepted, and the
     studies' ``min_trial_timesteps`` are ignored."""
+    until_converged: Convergence | None = None
+    """Also stop each evolution once CMA-ES has converged by this rule (``ermrl evolve --until-converged``);
+    ``trials`` is then the most it may take."""
 
 
 SCALES = {
@@ -99,7 +103,18 @@ SCALES = {
     "paper": Scale("paper", trials=900, seeds=3, timesteps=300_000, popsize=None, select_top=5, select_seeds=5,
                    test_seeds=10, test_timesteps=1_000_000, long_test_timesteps=3_000_000,
                    description="the paper: 900 trials, 3 seeds × 300k; test 10 seeds × 1M (LunarLander 3M)"),
+    "converged": Scale("converged", trials=900, seeds=3, timesteps=300_000, popsize=None, select_top=5,
+                       select_seeds=5, test_seeds=10, test_timesteps=1_000_000, long_test_timesteps=3_000_000,
+                       description="the paper's per-trial budget (3 seeds × 300k), each evolution stopped once CMA-ES "
+                                   "has converged (spread below 0.01 decades for 3 generations) or at 900 trials; "
+                                   "select the top 5 on 5 seeds; test 10 seeds × 1M (LunarLander 3M)",
+                       until_converged=Convergence()),
 }
+
+CONVERGED_TRIALS = 200
+"""About the trials a study takes to converge by the default rule: the paper's 900-trial CartPoleNoVel study
+converges at generation 32, 198 trials in (``ermrl convergence``). Only for the time estimate of the
+``converged`` scale."""
 
 
 def _short(env_id: str) -> str:

@@ -14,6 +14,7 @@ from ermrl import envs, storage
 from ermrl.agent import AgentConfig
 from ermrl.errors import ConfigError
 from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.convergence import Convergence
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.experiments.evaluation import MAX_TEST_SEEDS, TestConfig, baseline_files
 from ermrl.experiments.registry import Experiment, Scale, StudySpec
@@ -24,6 +25,9 @@ from ermrl.training.config import MAX_TIMESTEPS
 
 JAX_RATE = 40_000.0
 """Nominal agent-steps/s of the JAX backend on 2 cores at a generation's population size (docs/benchmarks.md)."""
+HOST_LOOP_RATE = 45_000.0
+"""Agent-steps/s of the host loop with the physics taken out (the per-step JAX calls and the PPO update): 48k
+measured on HalfCheetah-v5 with 21 agents on 2 cores (docs/benchmarks.md)."""
 WEIGHT_S = 0.2e-9
 """Seconds per agent-step for each recurrent weight beyond a 100-unit reservoir's. Every step reads the whole
 (units, units) W of every agent from memory, so 1000 units step ≈ 8× slower than 100 on a quiet machine
@@ -45,6 +49,8 @@ class StudyPlan:
     select_seeds: int = 0
     """Selection after the evolution: the top ``select_top`` trials, each re-evaluated on ``select_seeds`` new seeds
     at the evolution's budget (the scale's values)."""
+    until_converged: Convergence | None = None
+    """The scale's convergence rule: the evolution also stops once CMA-ES has converged by it."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,16 +124,21 @@ def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "aut
                                  env_id=None if (e,) == spec.envs else e, auc_steps=min(300_000, steps))
                       for e in spec.tested_on)
         name = f"{experiment.name}-{scale.name}-{spec.name}"
-        plans.append(StudyPlan(spec, name, folder / spec.name, config, tests, scale.select_top, scale.select_seeds))
+        plans.append(StudyPlan(spec, name, folder / spec.name, config, tests, scale.select_top, scale.select_seeds,
+                               scale.until_converged))
     return plans
 
 
 def _rate(env_id: str, backend: str) -> float:
-    """Rough agent-steps/s of ``env_id`` here: nominal on JAX, from a measured env step on the host."""
-    if envs.resolve_backend(env_id, backend) == "jax":
+    """Rough agent-steps/s of ``env_id`` here: nominal on JAX, from a measured env step on the host backends."""
+    resolved = envs.resolve_backend(env_id, backend)
+    if resolved == "jax":
         return JAX_RATE
     from ermrl.envs import host_backend
 
+    if resolved == "mujoco":
+        step = host_backend.batched_step_seconds(envs.describe(env_id, backend))
+        return 1.0 / (step + 1.0 / HOST_LOOP_RATE)
     step = host_backend.step_seconds(envs.describe(env_id, backend))
     return min(2.0 / (step + 150e-6), JAX_RATE / 3)  # 2 cores; ~0.15 ms of JAX and IPC per step
 
@@ -138,6 +149,21 @@ COMPILE_S = 60.0  # compiles of a study with work left: evolution, selection and
 def reservoir_seconds(agent) -> float:
     """Extra seconds per agent-step of ``agent``'s (an AgentConfig) reservoirs over 100-unit ones."""
     return WEIGHT_S * agent.reservoirs * max(agent.spec.units ** 2 - 100 ** 2, 0)
+
+
+def trials_done(p: StudyPlan, study) -> int:
+    """The study's completed trials, or ``p.config.trials`` once it has converged by the plan's rule (its
+    evolution is then done)."""
+    from optuna.trial import TrialState
+
+    from ermrl.evolution import convergence
+
+    done = len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
+    if done < p.config.trials and p.until_converged is not None and p.config.sampler == "cmaes":
+        verdict = convergence.judge(study, p.config.space, p.config.generation_size, p.until_converged)
+        if verdict.generation is not None:
+            return p.config.trials
+    return done
 
 
 def selection_left(p: StudyPlan, study) -> bool:
@@ -222,12 +248,13 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
     phase stopped midway keeps its finished models for the rerun (:mod:`ermrl.experiments.checkpoints`), and with
     ``baseline_store`` the PPO baselines are shared with other test phases (:mod:`ermrl.experiments.baseline_models`)."""
     import optuna
-    from optuna.trial import TrialState
 
     from ermrl.analysis.experiment_report import write_experiment_report
-    from ermrl.evolution.evolve import count, evolve, make_trainers
+    from ermrl.evolution import convergence
+    from ermrl.evolution.evolve import Member, evolve_together, make_trainers, shape
     from ermrl.evolution.selection import load_selection, select
     from ermrl.evolution.study import ATTR, make_sampler, open_study
+    from ermrl.evolution.workers import WorkerConfig
     from ermrl.experiments import baseline_runs, baselines, checkpoints
     from ermrl.experiments.evaluation import run_test_phase, test_dir
 
@@ -235,22 +262,40 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
     plans = [p for p in plan(experiment, scale, folder, backend, env_workers, budget)
              if not only or p.spec.name in only]
     url = storage_url or default_storage(folder)
+    opened: dict[str, tuple] = {}
+
+    def prepare(p: StudyPlan) -> tuple[EvolveConfig, object]:
+        """The plan's config (with its baselines: computed first when missing) and its opened study."""
+        if p.study not in opened:
+            config = p.config
+            if config.normalized:
+                # smoke budgets are too short for PPO to beat a random agent: it checks the wiring, not the science
+                config = baseline_runs.with_baselines(config, baselines_table, url, p.study, log, progress,
+                                                      allow_weak=scale.wiring_only, advice=WEAK_ADVICE)
+            study = open_study(url, p.study, make_sampler(config.sampler, config.generation_size, config.sampler_seed),
+                               storage.encode_study_record(config))
+            stored = storage.decode_study_record(study.user_attrs[ATTR])
+            opened[p.study] = (dataclasses.replace(config, baselines=stored.baselines), study)
+        return opened[p.study]
+
     for i, p in enumerate(plans):
         start = time.perf_counter()
         log(f"[{i + 1}/{len(plans)}] {p.study}: evolve on {', '.join(p.config.env_ids)} ({p.config.trials} trials × "
             f"{p.config.seeds} seeds × {p.config.train.total_timesteps:,} steps, {p.spec.reservoirs} reservoir(s))")
-        config = p.config
-        if config.normalized:
-            # smoke budgets are too short for PPO to beat a random agent: it checks the wiring, not the science
-            config = baseline_runs.with_baselines(config, baselines_table, url, p.study, log, progress,
-                                                  allow_weak=scale.wiring_only, advice=WEAK_ADVICE)
-        study = open_study(url, p.study, make_sampler(config.sampler, config.generation_size, config.sampler_seed),
-                           storage.encode_study_record(config))
-        config = dataclasses.replace(config, baselines=storage.decode_study_record(study.user_attrs[ATTR]).baselines)
-        # no bar for a finished evolution: entering one prints "compiling" where nothing trains
-        evolving = count(study, TrialState.COMPLETE) < config.trials
-        bar = progress(f"evolve {p.spec.name}") if progress and evolving else None
-        evolve(study, config, make_trainers(config), (lambda g: bar(g.train) if g.train else None) if bar else None)
+        config, study = prepare(p)
+        if trials_done(p, study) < config.trials:  # with every later study of its shape still evolving, as one population
+            group = [q for q in plans[i:] if q is p or (shape(q.config) == shape(p.config)
+                                                         and trials_done(q, prepare(q)[1]) < q.config.trials)]
+            if len(group) > 1:
+                log(f"    evolving {len(group)} studies as one population: {', '.join(q.spec.name for q in group)}")
+            # no bar for a finished evolution: entering one prints "compiling" where nothing trains
+            bar = progress(f"evolve {'+'.join(q.spec.name for q in group)}") if progress else None
+            evolve_together([Member(prepare(q)[1], prepare(q)[0], WorkerConfig(until_converged=q.until_converged))
+                             for q in group], make_trainers(config),
+                            (lambda g: bar(g.train) if g.train else None) if bar else None)
+        stopped = convergence.recorded(study, p.until_converged) if p.until_converged else None
+        if stopped:
+            log(f"    converged at generation {stopped['generation']} ({stopped['trials']} trials)")
         sel = load_selection(study)
         if selection_left(p, study):
             sel = select(study, config, p.select_top, p.select_seeds, progress)

@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ermrl.envs.spaces import ActionSpace
+from ermrl.ppo import ordered
 
 
 def orthogonal(gain: float, iterations: int = 60):
@@ -172,7 +173,7 @@ class ActorCritic:
             return jnp.take_along_axis(logp, action[..., None].astype(jnp.int32), axis=-1)[..., 0]
         log_std = self._log_std(params, latent)
         z = (action - head) * jnp.exp(-log_std)
-        return jnp.sum(-0.5 * z**2 - log_std - 0.5 * jnp.log(2 * jnp.pi), axis=-1)
+        return ordered.tree_sum(-0.5 * z**2 - log_std - 0.5 * jnp.log(2 * jnp.pi))
 
     def entropy(self, params: PolicyParams, head: jax.Array, latent: jax.Array | None = None) -> jax.Array:
         """(...,) entropy of π."""
@@ -180,4 +181,4 @@ class ActorCritic:
             logp = jax.nn.log_softmax(head, axis=-1)
             return -jnp.sum(jnp.exp(logp) * logp, axis=-1)
         per_dim = 0.5 + 0.5 * jnp.log(2 * jnp.pi) + self._log_std(params, latent)
-        return jnp.broadcast_to(jnp.sum(per_dim, axis=-1), head.shape[:-1])
+        return jnp.broadcast_to(ordered.tree_sum(per_dim), head.shape[:-1])

@@ -59,13 +59,13 @@ def make_agent_fns(config: TrainConfig) -> AgentFns:
         log = IterationLog(steps.finished_return, steps.finished_length, metrics, finite)
         return AgentState(learner, state.reservoirs, carry, state.key), log
 
-    def iteration(state: AgentState) -> tuple[AgentState, IterationLog]:
+    def rollout(state: AgentState) -> tuple[AgentState, EnvCarry, Step, jax.Array]:
         key, k_roll, k_update = jax.random.split(state.key, 3)
         carry, steps = collect(env, agent, net, state.learner.params, state.reservoirs, state.envs, k_roll,
                                ppo.n_steps, ppo.gamma, ppo.sde_sample_freq)
-        return learn(state._replace(key=key), carry, steps, k_update)
+        return state._replace(key=key), carry, steps, k_update
 
-    return AgentFns(env, agent, net, init, iteration, learn)
+    return AgentFns(env, agent, net, init, rollout, learn)
 
 
 class Programs(NamedTuple):
@@ -77,21 +77,38 @@ class Programs(NamedTuple):
     init: Callable
     """Jitted, sharded ``fns.init`` over a padded population."""
     iteration: Callable
-    """Jitted, sharded ``fns.iteration`` (donates its state)."""
+    """Jitted, sharded rollout and update (donates its state): ``fns.rollout`` for the agents of a device at
+    once (``vmap``), then ``fns.learn`` one agent after the other (``lax.map``)."""
     learn: Callable
-    """Jitted, sharded ``fns.learn`` (donates its state)."""
+    """Jitted, sharded ``fns.learn``, one agent after the other (donates its state)."""
     compiled: dict[int, Callable]
     """Padded population size -> the compiled iteration for it."""
 
 
 def build_programs(config: TrainConfig, devices: tuple) -> Programs:
-    """Jits ``config``'s per-agent functions, ``vmap``-ed over agents and sharded over ``devices``."""
+    """Jits ``config``'s per-agent functions over a population sharded over ``devices``. The rollout is
+    ``vmap``-ed over each device's agents; the initialization and the update run one agent after the other
+    (``lax.map``), each on its own shapes: XLA:CPU rounds a batched QR (the orthogonal init) and the update's
+    reductions differently for different batch sizes, and an agent must train the same alone as inside any
+    population (studies trained together; see also :mod:`ermrl.ppo.ordered`)."""
     fns = make_agent_fns(config)
     mesh = Mesh(np.array(devices), ("agents",))
     spec = PartitionSpec("agents")
-    shard = lambda f: jax.shard_map(jax.vmap(f), mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
-    return Programs(fns, NamedSharding(mesh, spec), jax.jit(shard(fns.init)),
-                    jax.jit(shard(fns.iteration), donate_argnums=0), jax.jit(shard(fns.learn), donate_argnums=0), {})
+    shard = lambda f: jax.shard_map(f, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
+
+    def one_by_one(f):
+        def each(*xs):
+            return jax.lax.map(lambda x: f(*x), xs)
+
+        each.__name__ = f.__name__  # the compiled program's name (``jit_init``, ``jit_learn``)
+        return each
+
+    def iteration(state: AgentState) -> tuple[AgentState, IterationLog]:
+        return one_by_one(fns.learn)(*jax.vmap(fns.rollout)(state))
+
+    return Programs(fns, NamedSharding(mesh, spec), jax.jit(shard(one_by_one(fns.init))),
+                    jax.jit(shard(iteration), donate_argnums=0), jax.jit(shard(one_by_one(fns.learn)), donate_argnums=0),
+                    {})
 
 
 @functools.lru_cache(maxsize=8)

@@ -170,10 +170,10 @@ def make_recurrent_fns(config):
         log = IterationLog(steps.finished_return, steps.finished_length, metrics, finite)
         return AgentState(learner, None, carry, state.key), log
 
-    def iteration(state: AgentState):
+    def rollout(state: AgentState):
         key, k_roll, k_update = jax.random.split(state.key, 3)
         carry, steps = collect(env, net, state.learner.params, state.envs, k_roll, ppo.n_steps, ppo.gamma,
                                ppo.sde_sample_freq)
-        return learn(state._replace(key=key), carry, steps, k_update)
+        return state._replace(key=key), carry, steps, k_update
 
-    return AgentFns(env, agent, net, init, iteration, learn)
+    return AgentFns(env, agent, net, init, rollout, learn)

@@ -51,7 +51,8 @@ class AgentFns(NamedTuple):
     init: Callable
     """(seed, unit_weights, phi, learning_rate, first_obs) -> AgentState. ``first_obs`` (n_envs, obs_dim) are
     the reset observations of host envs; None on the JAX backend, which resets its own envs."""
-    iteration: Callable
-    """AgentState -> (AgentState, IterationLog): rollout and update, JAX backend only."""
+    rollout: Callable
+    """AgentState -> (AgentState with its next key, final EnvCarry, Step (n_steps, n_envs, ...), update key): the
+    rollout half of an iteration on the JAX backend, whose outputs ``learn`` takes."""
     learn: Callable
     """(AgentState, final EnvCarry, Step (n_steps, n_envs, ...), key) -> (AgentState, IterationLog)."""

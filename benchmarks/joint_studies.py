@@ -1,0 +1,87 @@
+"""Several studies of one shape evolved as one population against one after another: the same trials, timed.
+
+    .venv/bin/python benchmarks/joint_studies.py [--env CartPoleNoVel-v1] [--studies 3] [--generations 2]
+                                                 [--timesteps 20480] [--repeats 2]
+
+Each study is CMA-ES over (sr, lr) with iss fixed at 1.0, popsize 6, 3 seeds a trial, ``timesteps`` steps per
+agent, its own sampler seed (0, 1, ...), for ``generations`` generations after the random startup. Mode
+``apart`` evolves the studies one after the other (``evolve``); mode ``together`` evolves them as one population
+(``evolve_together``); both in a fresh process with the compilation cache warm (one untimed run of each mode
+first), the modes timed in turn, ``repeats`` times. Prints the median wall time of each mode, the ratio, and
+whether both modes gave the same trials.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+
+def run_mode(mode: str, args) -> list:
+    """Evolves the studies in ``mode`` in this process; returns every study's (params, value) per trial."""
+    import dataclasses
+
+    import optuna
+
+    from ermrl.compile_cache import enable
+    from ermrl.evolution.config import EvolveConfig
+    from ermrl.evolution.evolve import Member, evolve, evolve_together
+    from ermrl.evolution.search_space import SearchSpace
+    from ermrl.evolution.study import make_sampler, open_study
+    from ermrl.storage import encode_study_record
+    from ermrl.training import TrainConfig
+
+    enable()
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    train = TrainConfig(env_id=args.env, total_timesteps=args.timesteps)
+    base = EvolveConfig(train=train, space=SearchSpace(fixed_iss=1.0), trials=6 * (args.generations + 1), seeds=3)
+    configs = [dataclasses.replace(base, sampler_seed=k) for k in range(args.studies)]
+    folder = tempfile.mkdtemp()
+    studies = [open_study(f"sqlite:///{folder}/s{k}.db", f"s{k}", make_sampler("cmaes", 6, k), encode_study_record(c))
+               for k, c in enumerate(configs)]
+    if mode == "together":
+        evolve_together([Member(s, c) for s, c in zip(studies, configs)])
+    else:
+        for s, c in zip(studies, configs):
+            evolve(s, c)
+    return [[(t.params, t.value) for t in s.trials] for s in studies]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", default="CartPoleNoVel-v1")
+    parser.add_argument("--studies", type=int, default=3)
+    parser.add_argument("--generations", type=int, default=2)
+    parser.add_argument("--timesteps", type=int, default=20480)
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--mode", choices=("apart", "together"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.mode:
+        print(json.dumps(run_mode(args.mode, args)))
+        return
+    flags = ["--env", args.env, "--studies", str(args.studies), "--generations", str(args.generations),
+             "--timesteps", str(args.timesteps)]
+    times: dict[str, list[float]] = {"apart": [], "together": []}
+    trials = {}
+    for repeat in range(args.repeats + 1):
+        for mode in ("apart", "together"):
+            start = time.perf_counter()
+            out = subprocess.run([sys.executable, __file__, *flags, "--mode", mode], check=True, capture_output=True,
+                                 text=True).stdout
+            if repeat:  # the first round warms the compilation cache
+                times[mode].append(time.perf_counter() - start)
+            trials[mode] = json.loads(out.strip().splitlines()[-1])
+    apart, together = (statistics.median(times[m]) for m in ("apart", "together"))
+    agent_steps = args.studies * 6 * (args.generations + 1) * 3 * args.timesteps
+    print(f"| {args.env} | {args.studies} × {args.generations + 1} generations × 18 agents × {args.timesteps:,} | "
+          f"{apart:.1f} s ({agent_steps / apart:,.0f}/s) | {together:.1f} s ({agent_steps / together:,.0f}/s) | "
+          f"{apart / together:.2f}× | {'same' if trials['apart'] == trials['together'] else 'DIFFERENT'} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,7 @@
+"""``python -m ermrl``: the ``ermrl`` command."""
+
+import sys
+
+from ermrl.cli import main
+
+sys.exit(main())

@@ -1,0 +1,155 @@
+"""When a CMA-ES study is done: the search distribution's spread per generation, and the stopping rule.
+
+Optuna's ``CmaEsSampler`` keeps its ``cmaes.CMA`` optimizer, pickled, in the system attributes
+(``cma:optimizer:0``, ``:1``, ...) of the first trial sampled in each CMA generation: while sampling that trial it
+tells the optimizer the previous generation's fitness, then stores it. The optimizer's search distribution,
+N(m, σ²C), lives in Optuna's transformed space, where each log-uniform parameter is mapped linearly from
+[log lo, log hi] to [0, 1], parameters in name order. The **spread** of a searched parameter is that
+distribution's standard deviation along it, in decades of the parameter:
+
+    spread_i = σ · sqrt(C_ii) · log10(hi_i / lo_i)
+
+ermrl's generation g > 0 was sampled from CMA generation g − 1's distribution; generation 0 is the sampler's
+random startup, which has none (see :mod:`ermrl.evolution.generations`). CMA generation 0's distribution is never
+stored (nothing was told yet), so the spreads start at generation 2.
+
+**The rule** (:class:`Convergence`): a study has converged at generation g when g and the G − 1 generations before
+it were each sampled with a spread below W decades in every searched parameter, and generation g has all its
+trials complete. The defaults, W = 0.01 decades (each Φ within about ±2.3 % of the mean at one standard deviation)
+and G = 3, stop the paper's 900-trial CartPoleNoVel study at generation 32, 198 trials in
+(``ermrl convergence``; docs/results.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import pickle
+
+import numpy as np
+import optuna
+from optuna.trial import FrozenTrial, TrialState
+
+from ermrl.errors import ConfigError
+from ermrl.evolution.generations import ATTR as GENERATION
+from ermrl.evolution.search_space import SearchSpace
+
+OPTIMIZER_KEY = "cma:optimizer:"
+"""The prefix of the system attributes in which Optuna's CmaEsSampler stores its pickled optimizer."""
+RECORD = "converged"
+"""The study user attribute written when a study stops by the rule: see :func:`record`."""
+MAX_WIDTH = 10.0
+MAX_GENERATIONS = 1000
+
+
+@dataclasses.dataclass(frozen=True)
+class Convergence:
+    """Stop a CMA-ES study once ``generations`` generations in a row were sampled with a spread below ``width``
+    decades in every searched parameter."""
+
+    width: float = 0.01
+    """Decades of each searched parameter (the spread is a standard deviation in log10 units)."""
+    generations: int = 3
+
+    def __post_init__(self):
+        if not (math.isfinite(self.width) and 0 < self.width <= MAX_WIDTH):
+            raise ConfigError(f"--converged-width must be in (0, {MAX_WIDTH:g}] decades, got {self.width}")
+        if not 1 <= self.generations <= MAX_GENERATIONS:
+            raise ConfigError(f"--converged-generations must be in 1..{MAX_GENERATIONS}, got {self.generations}")
+
+    def describe(self) -> str:
+        return f"spread below {self.width:g} decades in every parameter for {self.generations} generations"
+
+
+def _optimizer(trial: FrozenTrial):
+    parts = {k: v for k, v in trial.system_attrs.items() if k.startswith(OPTIMIZER_KEY)}
+    if not parts:
+        return None
+    return pickle.loads(bytes.fromhex("".join(parts[f"{OPTIMIZER_KEY}{i}"] for i in range(len(parts)))))
+
+
+def centers_and_spreads(trials: list[FrozenTrial], space: SearchSpace) -> dict[int, dict[str, tuple[float, float]]]:
+    """{generation: {parameter: (the distribution's mean as a Φ value, its spread in decades)}} for every
+    generation whose sampling distribution the study holds (from generation 2 on), read from the optimizers
+    Optuna stored."""
+    widths = {name: (math.log10(d.low), math.log10(d.high / d.low))
+              for name, d in sorted(space.distributions().items())}
+    out: dict[int, dict[str, tuple[float, float]]] = {}
+    for t in sorted(trials, key=lambda t: t.number):
+        opt = _optimizer(t)
+        if opt is None or opt.generation + 1 in out:
+            continue
+        sd = opt._sigma * np.sqrt(np.diag(opt._C))  # cmaes.CMA keeps σ and C private; no public accessor
+        if len(sd) != len(widths):
+            continue  # another search space (Optuna's independent sampler took over): no spread to read
+        out[opt.generation + 1] = {name: (float(10 ** (low + m * w)), float(s * w))
+                                   for (name, (low, w)), s, m in zip(widths.items(), sd, opt.mean)}
+    return out
+
+
+def spreads(trials: list[FrozenTrial], space: SearchSpace) -> dict[int, dict[str, float]]:
+    """{generation: {parameter: spread in decades}}: :func:`centers_and_spreads` without the centers."""
+    return {g: {name: s for name, (_, s) in d.items()} for g, d in centers_and_spreads(trials, space).items()}
+
+
+def complete_generations(trials: list[FrozenTrial], popsize: int) -> set[int]:
+    """The generations with at least ``popsize`` COMPLETE trials (ermrl's generation user attribute)."""
+    counts: dict[int, int] = {}
+    for t in trials:
+        if t.state == TrialState.COMPLETE and GENERATION in t.user_attrs:
+            counts[int(t.user_attrs[GENERATION])] = counts.get(int(t.user_attrs[GENERATION]), 0) + 1
+    return {g for g, n in counts.items() if n >= popsize}
+
+
+def stop_generation(spread: dict[int, dict[str, float]], rule: Convergence, complete: set[int] | None = None) -> int | None:
+    """The first generation at which ``rule`` holds on ``spread`` (and which is in ``complete``, when given), or
+    None."""
+    streak, previous = 0, None
+    for g in sorted(spread):
+        narrow = all(v < rule.width for v in spread[g].values())
+        streak = (streak + 1 if previous == g - 1 else 1) if narrow else 0
+        previous = g
+        if streak >= rule.generations and (complete is None or g in complete):
+            return g
+    return None
+
+
+@dataclasses.dataclass(frozen=True)
+class Verdict:
+    """Where a study stands under a rule."""
+
+    generation: int | None
+    """The generation at which the rule holds, or None."""
+    trials: int
+    """COMPLETE trials of generations up to ``generation`` (all COMPLETE trials when it is None)."""
+    spread: dict[int, dict[str, float]]
+
+
+def judge(study: optuna.Study, space: SearchSpace, popsize: int, rule: Convergence,
+          trials: list[FrozenTrial] | None = None) -> Verdict:
+    """Applies ``rule`` to ``study`` (its trials, or ``trials``)."""
+    trials = study.get_trials(deepcopy=False) if trials is None else trials
+    spread = spreads(trials, space)
+    g = stop_generation(spread, rule, complete_generations(trials, popsize))
+    done = [t for t in trials if t.state == TrialState.COMPLETE
+            and (g is None or int(t.user_attrs.get(GENERATION, 0)) <= g)]
+    return Verdict(g, len(done), spread)
+
+
+def record(study: optuna.Study, rule: Convergence, verdict: Verdict) -> dict:
+    """Writes and returns the study's ``converged`` user attribute: the generation, the trials completed up to
+    it, the rule, and the spreads of its last generation."""
+    value = {"generation": verdict.generation, "trials": verdict.trials, "width": rule.width,
+             "generations": rule.generations, "spread": verdict.spread[verdict.generation]}
+    study.set_user_attr(RECORD, value)
+    return value
+
+
+def recorded(study: optuna.Study, rule: Convergence | None = None) -> dict | None:
+    """The study's ``converged`` record, if any (and, with ``rule``, only if written under that rule)."""
+    value = study.user_attrs.get(RECORD)
+    if not isinstance(value, dict) or value.get("generation") is None:
+        return None
+    if rule is not None and (value.get("width"), value.get("generations")) != (rule.width, rule.generations):
+        return None
+    return value

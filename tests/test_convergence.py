@@ -1,0 +1,139 @@
+"""The convergence rule of CMA-ES studies: its arithmetic, its replay on the committed 900-trial study, and
+``ermrl evolve --until-converged`` on a real (tiny) study."""
+
+import json
+import shutil
+from pathlib import Path
+
+import optuna
+import pytest
+from optuna.trial import TrialState
+
+from ermrl.errors import ConfigError
+from ermrl.evolution import convergence
+from ermrl.evolution.convergence import Convergence, stop_generation
+from ermrl.evolution.search_space import SearchSpace
+from ermrl.evolution.study import load_study
+
+from cli_runs import ermrl as cli
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+PAPER = Path(__file__).resolve().parents[1] / "docs" / "data" / "partial-observability-paper" / "studies.log"
+PAPER_STUDY = "partial-observability-paper-cartpole-1res"
+
+
+def _spread(*values):
+    return {g: {"lr": v, "sr": v} for g, v in enumerate(values, start=2)}
+
+
+def test_the_rule_needs_g_narrow_generations_in_a_row_and_the_last_complete():
+    rule = Convergence(width=0.01, generations=3)
+    assert stop_generation(_spread(0.5, 0.009, 0.009, 0.02, 0.009, 0.009, 0.009, 0.009), rule) == 8
+    assert stop_generation(_spread(0.009, 0.009), rule) is None
+    assert stop_generation(_spread(0.009, 0.009, 0.009), rule, complete={2, 3}) is None
+    assert stop_generation(_spread(0.009, 0.009, 0.009, 0.009), rule, complete={2, 3, 5}) == 5
+    # one parameter still wide keeps the study going; a generation missing breaks the streak
+    wide_sr = {g: {"lr": 0.001, "sr": 0.05 if g == 3 else 0.001} for g in range(2, 6)}
+    assert stop_generation(wide_sr, rule) is None
+    assert stop_generation({2: {"x": 0.0}, 3: {"x": 0.0}, 5: {"x": 0.0}}, rule) is None
+    assert stop_generation(_spread(0.009), Convergence(0.01, 1)) == 2
+
+
+@pytest.mark.parametrize("width, generations, message", [
+    (0.0, 3, "--converged-width must be in (0, 10] decades, got 0.0"),
+    (float("nan"), 3, "--converged-width must be in (0, 10] decades, got nan"),
+    (0.01, 0, "--converged-generations must be in 1..1000, got 0"),
+])
+def test_a_bad_rule_is_refused_with_its_flag(width, generations, message):
+    with pytest.raises(ConfigError) as e:
+        Convergence(width, generations)
+    assert str(e.value) == message
+
+
+def test_the_spread_read_back_from_the_paper_study_matches_the_sampled_phi():
+    """The distributions stored by Optuna, read as decades, start where CMA-ES starts (σ0 = 1/6 of each
+    parameter's range in Optuna's [0, 1] space, after one update) and describe the Φ the generations sampled:
+    the distribution's mean at the last generation is the Φ around which the last trials sit."""
+    study = load_study(f"journal:{PAPER}", PAPER_STUDY)
+    space = SearchSpace(fixed_iss=1.0)
+    dists = convergence.centers_and_spreads(study.get_trials(deepcopy=False), space)
+    assert min(dists) == 2 and max(dists) >= 140
+    assert 0.15 < dists[2]["lr"][1] < 2 / 6 and 0.4 < dists[2]["sr"][1] < 6 / 6
+    last = dists[max(dists)]
+    tail = [t for t in study.trials if t.state == TrialState.COMPLETE and t.user_attrs["generation"] == max(dists)]
+    for name in ("sr", "lr"):
+        assert all(abs(t.params[name] / last[name][0] - 1) < 0.01 for t in tail)
+
+
+def test_the_replay_on_the_paper_study_stops_at_generation_32_and_copies_the_study_as_the_rule_left_it(tmp_path):
+    out, copy = tmp_path / "replay", f"journal:{tmp_path / 'replay.log'}"
+    run = cli("convergence", "--study", PAPER_STUDY, "--storage", f"journal:{PAPER}", "--out", out,
+              "--copy-to", copy)
+    assert run.returncode == 0, run.stderr
+    assert f"study '{PAPER_STUDY}' converged at generation 32: 198 of its 900 completed trials (22% of the " \
+           "compute)" in run.stdout
+    summary = json.loads((out / "convergence.json").read_text())
+    assert (summary["stop_generation"], summary["trials_to_stop"], summary["trials"]) == (32, 198, 900)
+    assert max(summary["mean_shift_decades"].values()) < 0.01
+    assert (out / "convergence.png").stat().st_size > 10_000
+    header = (out / "convergence.csv").read_text().splitlines()[0]
+    assert header == "generation,lr_spread_decades,sr_spread_decades,lr_mean,sr_mean"
+    copied = load_study(copy, PAPER_STUDY)
+    assert {t.user_attrs["generation"] for t in copied.trials} == set(range(33))
+    assert len([t for t in copied.trials if t.state == TrialState.COMPLETE]) == 198
+    assert copied.user_attrs["converged"] == {**copied.user_attrs["converged"], "generation": 32, "trials": 198}
+    again = cli("convergence", "--study", PAPER_STUDY, "--storage", f"journal:{PAPER}", "--out", out,
+                "--copy-to", copy)
+    assert again.returncode == 2
+    assert again.stderr.strip().endswith(f"already holds a study '{PAPER_STUDY}'; give --copy-to another storage")
+
+
+def _evolve(tmp_path, *extra):
+    return cli("evolve", "--env", "CartPoleNoVel-v1", "--timesteps", "2048", "--seeds", "1", "--popsize", "2",
+               "--fixed-iss", "1.0", "--trials", "40", "--study", "s", "--out", tmp_path / "s", "--quiet",
+               "--no-estimate", *extra)
+
+
+def test_evolve_until_converged_stops_records_why_and_a_rerun_does_nothing(tmp_path):
+    """A rule that any distribution meets (10 decades, 1 generation) stops the study once the first generation
+    with a stored distribution (generation 2) is complete: 6 trials of the 40 allowed."""
+    rule = ("--until-converged", "--converged-width", "10", "--converged-generations", "1")
+    run = _evolve(tmp_path, *rule)
+    assert run.returncode == 0, run.stderr
+    assert "converged at generation 2 (6 trials)" in run.stdout
+    study = load_study(f"sqlite:///{tmp_path}/s/study.db", "s")
+    assert len(study.trials) == 6
+    assert study.user_attrs["converged"]["generation"] == 2 and study.user_attrs["converged"]["width"] == 10
+    again = _evolve(tmp_path, *rule)
+    assert again.returncode == 0
+    assert "study 's' converged at generation 2 (6 trials): spread below 10 decades in every parameter for 1 " \
+           "generations; nothing to do" in again.stdout
+    assert len(load_study(f"sqlite:///{tmp_path}/s/study.db", "s").trials) == 6
+    report = cli("report", "--study", "s", "--out", tmp_path / "s")
+    assert report.returncode == 0
+    page = (tmp_path / "s" / "report.html").read_text()
+    assert "stopped: CMA-ES converged at generation 2 (6 trials)" in page and 'alt="Φ spread per generation"' in page
+    assert (tmp_path / "s" / "phi_spread.png").stat().st_size > 10_000
+
+
+def test_until_converged_needs_cmaes_and_nothing_is_written(tmp_path):
+    run = _evolve(tmp_path, "--until-converged", "--sampler", "random")
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines()[-1].endswith(
+        "--until-converged reads CMA-ES's search distribution; --sampler random has none (use --sampler cmaes, or "
+        "stop at --trials)")
+    assert not (tmp_path / "s").exists()
+
+
+def test_a_converged_scale_treats_a_converged_study_as_evolved(tmp_path):
+    from ermrl.experiments import registry, runner
+
+    shutil.copy(PAPER, tmp_path / "studies.log")
+    experiment = registry.get("partial-observability")
+    plans = runner.plan(experiment, registry.SCALES["converged"], tmp_path)
+    p = next(p for p in plans if p.spec.name == "cartpole-1res")
+    study = load_study(f"journal:{tmp_path / 'studies.log'}", PAPER_STUDY)
+    assert p.until_converged == Convergence() and p.config.trials == 900
+    assert runner.trials_done(p, study) == 900  # converged at generation 32: nothing left to evolve
+    paper = next(q for q in runner.plan(experiment, registry.SCALES["paper"], tmp_path) if q.spec.name == "cartpole-1res")
+    assert paper.until_converged is None

@@ -1,0 +1,122 @@
+"""Several studies of one training shape evolved as one population (``evolve_together``): each study's trials are
+those it gets alone, trial by trial, on the JAX and the MuJoCo backends, and a kill during a joint generation
+resumes every study."""
+
+import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import optuna
+import pytest
+from optuna.trial import TrialState
+
+from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.evolve import Member, evolve, evolve_together
+from ermrl.evolution.search_space import SearchSpace
+from ermrl.evolution.study import make_sampler, open_study
+from ermrl.storage import encode_study_record
+from ermrl.training import TrainConfig
+
+optuna.logging.set_verbosity(optuna.logging.WARNING)
+
+
+def _configs(env_id: str, timesteps: int, backend: str = "auto") -> list[EvolveConfig]:
+    """Two studies of one shape that differ in what they search: another sampler seed, and iss searched or fixed."""
+    train = TrainConfig(env_id=env_id, total_timesteps=timesteps, backend=backend)
+    a = EvolveConfig(train=train, space=SearchSpace(fixed_iss=1.0), trials=6, seeds=2, popsize=2, sampler_seed=0)
+    return [a, dataclasses.replace(a, space=SearchSpace(), sampler_seed=1)]
+
+
+def _open(folder, name: str, config: EvolveConfig) -> optuna.Study:
+    return open_study(f"sqlite:///{folder}/{name}.db", name, make_sampler("cmaes", 2, config.sampler_seed),
+                      encode_study_record(config))
+
+
+def _trials(study: optuna.Study) -> list[tuple]:
+    return [(t.number, t.state, t.params, t.value, t.user_attrs["generation"], t.user_attrs["seeds"],
+             t.user_attrs["seed_fitness"]) for t in study.trials]
+
+
+@pytest.mark.parametrize("env_id, timesteps, backend", [
+    ("CartPoleNoVel-v1", 2048, "auto"),
+    ("Ant-v5", 4096, "mujoco"),  # two updates: an agent's update and its orthogonal init do not see the others
+])
+def test_studies_trained_as_one_population_get_the_trials_they_get_alone(env_id, timesteps, backend, tmp_path):
+    configs = _configs(env_id, timesteps, backend)
+    alone = []
+    for k, config in enumerate(configs):
+        study = _open(tmp_path, f"alone{k}", config)
+        evolve(study, config)
+        alone.append(_trials(study))
+    together = [_open(tmp_path, f"together{k}", config) for k, config in enumerate(configs)]
+    evolve_together([Member(study, config) for study, config in zip(together, configs)])
+    for study, expected in zip(together, alone):
+        assert _trials(study) == expected
+    assert [len(t) for t in alone] == [6, 6] and all(t[1] == TrialState.COMPLETE for t in alone[0] + alone[1])
+    assert {t[4] for t in alone[0]} == {0, 1, 2}  # the random startup and two CMA-ES generations
+
+
+def test_studies_of_other_shapes_are_refused(tmp_path):
+    a, b = _configs("CartPoleNoVel-v1", 2048)
+    b = dataclasses.replace(b, train=dataclasses.replace(b.train, total_timesteps=4096))
+    with pytest.raises(ValueError, match="must share their training config and envs"):
+        evolve_together([Member(_open(tmp_path, "a", a), a), Member(_open(tmp_path, "b", b), b)])
+
+
+SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {tests!r})
+    from test_joint_evolution import _configs, _open
+    from ermrl.evolution.evolve import Member, evolve_together
+    configs = _configs("CartPoleNoVel-v1", 16384)  # a generation of a few seconds: time to kill it
+    configs = [c.__class__(**{{**c.__dict__, "trials": 8}}) for c in configs]
+    evolve_together([Member(_open({folder!r}, f"s{{k}}", c), c) for k, c in enumerate(configs)])
+""")
+
+
+def test_a_kill_during_a_joint_generation_resumes_every_study(tmp_path):
+    """SIGKILL while both studies have trials of one joint population running: the rerun fails those trials as
+    interrupted (their process is gone), trains their generation again, and both studies reach their 8 trials,
+    every generation with its 2 completed trials."""
+    script = SCRIPT.format(tests=os.path.dirname(__file__), folder=str(tmp_path))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    run = subprocess.Popen([sys.executable, "-c", script], env=env, stderr=subprocess.PIPE)
+    deadline = time.time() + 240
+    try:
+        while time.time() < deadline:
+            time.sleep(0.3)
+            assert run.poll() is None, run.stderr.read().decode()
+            states = []
+            for k in range(2):
+                if not (tmp_path / f"s{k}.db").exists():
+                    break
+                try:
+                    trials = optuna.load_study(study_name=f"s{k}", storage=f"sqlite:///{tmp_path}/s{k}.db").trials
+                except Exception:  # not created yet, or locked by the writer
+                    break
+                states.append([t.user_attrs.get("generation") for t in trials if t.state == TrialState.RUNNING])
+            if len(states) == 2 and all(states) and states[0][0] == states[1][0] and states[0][0] is not None \
+                    and states[0][0] >= 1:
+                break
+        else:
+            pytest.fail("the joint generation never started")
+        killed_generation = states[0][0]
+        run.send_signal(signal.SIGKILL)
+        run.wait(30)
+    finally:
+        if run.poll() is None:
+            run.kill()
+    subprocess.run([sys.executable, "-c", script], env=env, check=True, timeout=600)
+    for k in range(2):
+        trials = optuna.load_study(study_name=f"s{k}", storage=f"sqlite:///{tmp_path}/s{k}.db").trials
+        complete = [t for t in trials if t.state == TrialState.COMPLETE]
+        failed = [t for t in trials if t.state == TrialState.FAIL]
+        assert len(complete) == 8
+        assert failed and all(t.user_attrs["failure"] == "interrupted" for t in failed)
+        assert {t.user_attrs["generation"] for t in failed} == {killed_generation}
+        per_generation = [sum(t.user_attrs["generation"] == g for t in complete) for g in range(4)]
+        assert per_generation == [2, 2, 2, 2]
