@@ -33,7 +33,7 @@ def run_mode(mode: str, args) -> list:
     from ermrl.evolution.evolve import Member, evolve, evolve_together
     from ermrl.evolution.search_space import SearchSpace
     from ermrl.evolution.study import make_sampler, open_study
-    from ermrl.storage import encode_study_record
+    from ermrl.evolution.record import encode_study_record
     from ermrl.training import TrainConfig
 
     enable()

@@ -12,7 +12,9 @@ import argparse
 from pathlib import Path
 
 
-import ermrl  # noqa: F401
+from ermrl import devices
+
+devices.setup()  # one JAX CPU device per core
 from ermrl.agent import AgentConfig, Phi
 from ermrl.analysis.plots import learning_curves
 from ermrl.training import Population, TrainConfig, train

@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-import ermrl  # noqa: F401  (one JAX device per core)
+from ermrl import devices
+
+devices.setup()  # one JAX CPU device per core
 from ermrl import storage
 from ermrl.agent import AgentConfig, Phi
 from ermrl.analysis.plots import learning_curves

@@ -525,12 +525,12 @@ phi_flags() {  # phi_flags STORAGE STUDY: the study's Φ* (selected, else best) 
   .venv/bin/python - "$1" "$2" <<'PY'
 import sys
 
-from ermrl import storage
+from ermrl.evolution.record import decode_study_record
 from ermrl.evolution.selection import chosen_trial
 from ermrl.evolution.study import ATTR, load_study
 
 study = load_study(sys.argv[1], sys.argv[2])
-trial, phi, how = chosen_trial(study, storage.decode_study_record(study.user_attrs[ATTR]), None)
+trial, phi, how = chosen_trial(study, decode_study_record(study.user_attrs[ATTR]), None)
 print(" ".join(f"--{f} " + " ".join(repr(float(v)) for v in getattr(phi, f)) for f in ("sr", "lr", "iss")))
 PY
 }

@@ -19,8 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-import ermrl  # noqa: F401
+from ermrl import devices
+
+devices.setup()  # one JAX CPU device per core
 from ermrl import storage
+from ermrl.evolution import record as study_record
 from ermrl.agent import AgentConfig
 from ermrl.analysis import statistics
 from ermrl.evolution.config import EvolveConfig
@@ -60,7 +63,7 @@ def main() -> None:
         config = EvolveConfig(train=train, space=SearchSpace(1, fixed_iss=1.0), trials=a.trials, seeds=a.seeds,
                               sampler_seed=i)
         study = open_study(url, f"selection-cartpole-{i}", make_sampler("cmaes", config.generation_size, i),
-                           storage.encode_study_record(config))
+                           study_record.encode_study_record(config))
         evolve(study, config)
         top = tuple(t.number for t in ranked_trials(study)[:a.top])
         sel = load_selection(study)

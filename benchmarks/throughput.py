@@ -32,7 +32,9 @@ def measure(env_id: str, size: int, iterations: int, units: int) -> dict:
     import jax
     import numpy as np
 
-    import ermrl  # noqa: F401  (one JAX device per core)
+    from ermrl import devices
+
+    devices.setup()  # one JAX CPU device per core
     from ermrl.agent import AgentConfig, Phi
     from ermrl.reservoir import ReservoirSpec
     from ermrl.training import Population, TrainConfig, Trainer

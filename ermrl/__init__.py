@@ -1,43 +1,37 @@
-"""ermrl: Evolving Reservoirs for Meta Reinforcement Learning, with a whole population trained as one JAX program."""
+"""ermrl: Evolving Reservoirs for Meta Reinforcement Learning, with a whole population trained as one JAX program.
 
-import os as _os
-
-import jax as _jax
-
-
-
-def _cpu_devices() -> tuple[int, str | None]:
-    """(CPU devices to ask JAX for, the problem with ERMRL_CPU_DEVICES or None): one per core unless the variable
-    sets a whole number >= 1. A bad value falls back to one per core; the CLI refuses it before any work."""
-    cores = _os.cpu_count() or 1
-    raw = _os.environ.get("ERMRL_CPU_DEVICES")
-    if raw is None:
-        return cores, None
-    try:
-        n = int(raw)
-    except ValueError:
-        n = 0
-    if n < 1:
-        return cores, (f"ERMRL_CPU_DEVICES must be a whole number >= 1 (the CPU devices a population is sharded "
-                       f"over), got {raw!r}; unset it to use one per core ({cores})")
-    return n, None
-
-
-# Expose every CPU core as a JAX device so that a population can be sharded over them. This only takes
-# effect before jax initializes its backends; ERMRL_CPU_DEVICES overrides the count.
-_CPU_DEVICES, CPU_DEVICES_ERROR = _cpu_devices()
-try:
-    _jax.config.update("jax_num_cpu_devices", _CPU_DEVICES)
-except RuntimeError:  # backends already initialized by the caller: keep their setting
-    pass
+Importing it changes nothing in JAX or matplotlib: the CLI and :class:`~ermrl.training.trainer.Trainer` ask for
+one JAX CPU device per core themselves (:mod:`ermrl.devices`), and figures are drawn without pyplot's global
+state. The public names are in ``__all__``; each is imported on first use, so that ``import ermrl`` stays cheap.
+"""
 
 __version__ = "0.1.0"
 
+_PUBLIC = {
+    "load_agent": "ermrl.saved_agent",
+    "ReservoirObservation": "ermrl.wrappers",
+    "AgentConfig": "ermrl.agent",
+    "Phi": "ermrl.agent",
+    "DEFAULT_PHI": "ermrl.agent",
+    "ReservoirSpec": "ermrl.reservoir",
+    "PPOConfig": "ermrl.ppo.config",
+    "TrainConfig": "ermrl.training.config",
+    "Population": "ermrl.training.config",
+    "Trainer": "ermrl.training.trainer",
+    "train": "ermrl.training.trainer",
+    "Results": "ermrl.training.results",
+    "EvolveConfig": "ermrl.evolution.config",
+    "SearchSpace": "ermrl.evolution.search_space",
+    "evolve": "ermrl.evolution.evolve",
+    "ConfigError": "ermrl.errors",
+}
+__all__ = ["__version__", *_PUBLIC]
+
 
 def __getattr__(name: str):
-    """``ermrl.load_agent``, imported on first use so that ``import ermrl`` stays cheap."""
-    if name == "load_agent":
-        from ermrl.saved_agent import load_agent
+    """The public names of ``__all__``, imported on first use."""
+    if name in _PUBLIC:
+        import importlib
 
-        return load_agent
+        return getattr(importlib.import_module(_PUBLIC[name]), name)
     raise AttributeError(f"module 'ermrl' has no attribute {name!r}")

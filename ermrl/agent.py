@@ -66,6 +66,10 @@ class Phi(NamedTuple):
     """Input scaling."""
 
 
+DEFAULT_PHI = Phi(0.95, 0.5, 1.0)
+"""The paper's unevolved Φ (spectral radius 0.95, leak rate 0.5, input scaling 1.0), as scalars."""
+
+
 class Reservoirs(NamedTuple):
     """An agent's K scaled reservoirs: W (K, N, N), Win (K, N, input_dim), bias (K, N), leak (K,)."""
 

@@ -1,11 +1,10 @@
-"""Every file ermrl writes or reads, in one place: run folders, curves, summaries, the study record, tables.
+"""Every file ermrl writes or reads, in one place: run folders, curves, summaries, tables.
 
 Every write goes to a temporary file in the same folder, is flushed to disk and renamed over the target, so a
 crash never leaves a half-written file behind; a folder of results is written beside its place and moved in whole
 (:func:`staged_folder`). Output paths are checked before any work (:func:`check_folder`, :func:`check_file`).
-Configs are frozen dataclasses; :func:`to_dict` and :func:`from_dict` are their typed codec (nested dataclasses,
-tuples, unions), and ``from_dict`` refuses unknown or mistyped keys with a one-line ConfigError, which is also how
-config files are checked.
+Configs are written and read with their typed codec (:mod:`ermrl.codec`); the study record is in
+:mod:`ermrl.evolution.record`.
 """
 
 from __future__ import annotations
@@ -22,19 +21,19 @@ import numpy as np
 
 from ermrl import provenance, summary_schema
 from ermrl.atomic import atomic_path, check_file, check_folder, repair_journal, staged_folder  # noqa: F401
+from ermrl.codec import OMIT_WHEN_DEFAULT, from_dict, to_dict  # noqa: F401  (the configs' codec, re-exported)
+from ermrl.codec import json_default as _json_default
 from ermrl.errors import ConfigError
 
 # -- writing (atomic_path, staged_folder, check_folder, check_file, repair_journal: ermrl.atomic) ----------
 
 
 def save_figure(fig, path: Path | str, dpi: int = 120) -> Path:
-    """Writes the matplotlib figure ``fig`` to ``path`` as PNG, atomically, after ``tight_layout``; closes it."""
-    import matplotlib.pyplot as plt
-
+    """Writes the matplotlib figure ``fig`` (a ``matplotlib.figure.Figure``, drawn without pyplot) to ``path`` as PNG,
+    atomically, after ``tight_layout``."""
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
-    plt.close(fig)
     return Path(path)
 
 
@@ -60,109 +59,8 @@ def write_csv(path: Path | str, header: list[str], rows) -> Path:
     return write_text(path, buf.getvalue())
 
 
-def _json_default(x):
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, Path):
-        return str(x)
-    raise TypeError(f"not JSON-serializable: {type(x).__name__}")
-
-
 def _float_or_none(v) -> float | None:
     return None if v is None or not np.isfinite(v) else float(v)
-
-
-# -- typed config codec ----------------------------------------------------------------------------------
-
-
-OMIT_WHEN_DEFAULT = "ermrl_omit_when_default"
-"""Field metadata key: a config field marked with it is left out of :func:`to_dict` while it has its default.
-For fields added after results were recorded: a config that does not use one keeps the record, and so the
-identity (study resumption, snapshots, stored baselines), it had before the field existed."""
-
-
-def to_dict(config) -> dict:
-    """A JSON-ready dict of a (nested) frozen dataclass config, less the fields marked
-    :data:`OMIT_WHEN_DEFAULT` that have their default value."""
-    return json.loads(json.dumps(_fields(config), default=_json_default))
-
-
-def _fields(obj):
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: _fields(getattr(obj, f.name)) for f in dataclasses.fields(obj)
-                if not (f.metadata.get(OMIT_WHEN_DEFAULT) and getattr(obj, f.name) == f.default)}
-    if isinstance(obj, (list, tuple)):
-        return [_fields(v) for v in obj]
-    if isinstance(obj, dict):
-        return {k: _fields(v) for k, v in obj.items()}
-    return obj
-
-
-def from_dict(cls, data: dict, where: str = ""):
-    """The dataclass ``cls`` built from ``data`` (as :func:`to_dict` writes it, or a config file's table).
-
-    Missing keys take the dataclass defaults; unknown keys and values of the wrong type raise ConfigError
-    naming the key, e.g. ``train.ppo.n_stpes``.
-    """
-    if not isinstance(data, dict):
-        raise ConfigError(f"{where or cls.__name__} must be a table of keys, got {type(data).__name__}")
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise ConfigError(f"unknown key {where + '.' if where else ''}{unknown[0]}; known keys: {', '.join(fields)}")
-    kwargs = {name: _decode(hints[name], value, f"{where + '.' if where else ''}{name}") for name, value in data.items()}
-    return cls(**kwargs)
-
-
-def _decode(tp, value, where: str):
-    origin, args = typing.get_origin(tp), typing.get_args(tp)
-    if origin is typing.Literal:
-        if value not in args:
-            raise ConfigError(f"{where} must be one of {', '.join(map(repr, args))}, got {value!r}")
-        return value
-    if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        errors = []
-        for arg in (a for a in args if a is not type(None)):
-            try:
-                return _decode(arg, value, where)
-            except ConfigError as e:
-                errors.append(e)
-        raise errors[0]
-    if dataclasses.is_dataclass(tp):
-        return from_dict(tp, value, where)
-    if origin is tuple:
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where} must be a list, got {value!r}")
-        item = args[0] if args else typing.Any
-        if len(args) == 2 and args[1] is Ellipsis or len(args) <= 1:
-            return tuple(_decode(item, v, where) for v in value)
-        if len(value) != len(args):
-            raise ConfigError(f"{where} must have {len(args)} values, got {len(value)}")
-        return tuple(_decode(a, v, where) for a, v in zip(args, value))
-    if tp is typing.Any:
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{where} must be a number, got {value!r}")
-        return float(value)
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where} must be an integer, got {value!r}")
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where} must be true or false, got {value!r}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{where} must be a string, got {value!r}")
-        return value
-    return value
 
 
 # -- curves and episodes ---------------------------------------------------------------------------------
@@ -364,41 +262,3 @@ def test_summary_problem(out: Path) -> str | None:
 
 # -- the study record --------------------------------------------------------------------------------------
 
-STUDY_RECORD_VERSION = 2
-
-
-def encode_study_record(config) -> dict:
-    """The study user attribute ``ermrl`` of an :class:`~ermrl.evolution.config.EvolveConfig`.
-
-    Flat keys a reader can use without decoding (env_id, envs, reservoirs, seeds, timesteps, learning_rate,
-    search_space), plus the nested training config and the multi-env fitness constants."""
-    return {
-        "version": STUDY_RECORD_VERSION, "env_id": config.env_ids[0], "envs": list(config.env_ids),
-        "reservoirs": config.space.reservoirs, "seeds": config.seeds, "timesteps": config.train.total_timesteps,
-        "sampler": config.sampler, "popsize": config.generation_size, "sampler_seed": config.sampler_seed,
-        "seed_schedule": config.seed_schedule,
-        "learning_rate": config.train.ppo.learning_rate, "search_space": config.space.to_dict(),
-        "train": to_dict(config.train), "trials": config.trials, "normalization": config.normalization,
-        "baselines": [to_dict(b) for b in config.baselines],
-    }
-
-
-def decode_study_record(record: dict):
-    """Inverse of :func:`encode_study_record` (also reads version-1 records, which had one env)."""
-    from ermrl.evolution.config import EvolveConfig
-    from ermrl.evolution.search_space import SearchSpace
-    from ermrl.evolution.scoring import Baseline
-    from ermrl.training.config import TrainConfig
-
-    try:
-        train = from_dict(TrainConfig, record["train"], "train")
-        return EvolveConfig(
-            train=train, space=SearchSpace.from_dict(record["reservoirs"], record["search_space"]),
-            trials=record["trials"], seeds=record["seeds"], sampler=record["sampler"], popsize=record["popsize"],
-            sampler_seed=record.get("sampler_seed", 0), seed_schedule=record.get("seed_schedule", "fixed"),
-            envs=tuple(record.get("envs", ())),
-            normalization=record.get("normalization", "episodic"),
-            baselines=tuple(from_dict(Baseline, b, "baselines") for b in record.get("baselines", ())))
-    except (KeyError, TypeError) as e:
-        raise ConfigError(f"the study's 'ermrl' record is incomplete or damaged ({type(e).__name__}: {e}); "
-                          "it was not written by this version of `ermrl evolve`") from None

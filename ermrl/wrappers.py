@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ermrl.agent import Agent, AgentConfig, Phi
+from ermrl.agent import Agent, AgentConfig, DEFAULT_PHI, Phi
 from ermrl.envs.spaces import ActionSpace, EnvInfo
 from ermrl.errors import ConfigError
 
@@ -25,7 +25,8 @@ class ReservoirObservation(gym.Wrapper):
     unbounded with ``agent.skip_connection``.
     """
 
-    def __init__(self, env: gym.Env, sr=0.95, lr=0.5, iss=1.0, seed: int = 0, agent: AgentConfig = AgentConfig()):
+    def __init__(self, env: gym.Env, sr=DEFAULT_PHI.sr, lr=DEFAULT_PHI.lr, iss=DEFAULT_PHI.iss, seed: int = 0,
+                 agent: AgentConfig = AgentConfig()):
         super().__init__(env)
         if agent.reservoirs < 1:
             raise ConfigError("ReservoirObservation needs at least one reservoir")

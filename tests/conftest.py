@@ -5,7 +5,9 @@ import tempfile
 # compile the same program (CartPoleNoVel at a CI budget, ...) compile it once. Set before JAX initializes.
 os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", tempfile.mkdtemp(prefix="ermrl-jax-cache-"))
 
-import ermrl  # noqa: E402,F401  (sets up one JAX device per CPU core before jax initializes)
+from ermrl import devices  # noqa: E402
+
+devices.setup()  # one JAX device per CPU core, before any test starts JAX's backends
 
 
 # -- a throwaway PostgreSQL server (tests of many workers on one study) ---------------------------------------

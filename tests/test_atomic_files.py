@@ -15,6 +15,7 @@ import numpy as np
 import optuna
 import pytest
 
+from ermrl.evolution.record import decode_study_record, encode_study_record
 from ermrl import storage
 from ermrl.agent_files import AGENT_FILES
 from ermrl.errors import ConfigError
@@ -130,7 +131,7 @@ def test_an_unwritable_output_is_refused_before_any_work(argv, flag, path, tmp_p
 
     space = SearchSpace(1, fixed_iss=1.0)
     study = optuna.create_study(storage=f"sqlite:///{tmp_path / 'studies.db'}", study_name="one", direction="maximize")
-    study.set_user_attr("ermrl", storage.encode_study_record(EvolveConfig(
+    study.set_user_attr("ermrl", encode_study_record(EvolveConfig(
         train=TrainConfig(env_id="CartPole-v1", total_timesteps=2048), space=space, trials=1, seeds=1)))
     study.add_trial(optuna.trial.create_trial(params={"sr": 0.95, "lr": 0.5}, distributions=space.distributions(),
                                               value=20.0))

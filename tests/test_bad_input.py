@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from bad_input_cases import CASES
+from ermrl.evolution.record import decode_study_record, encode_study_record
 from ermrl.cli import main
 
 from cli_runs import ermrl_process as ermrl
@@ -79,7 +80,7 @@ def _template(folder: Path) -> None:
     for name in ("empty", "one", "plain"):
         study = optuna.create_study(storage=url, study_name=name, direction="maximize")
         if name != "plain":
-            study.set_user_attr(ATTR, storage.encode_study_record(config))
+            study.set_user_attr(ATTR, encode_study_record(config))
         if name == "one":
             study.add_trial(optuna.trial.create_trial(params={"sr": 0.95, "lr": 0.5},
                                                       distributions=space.distributions(), value=20.0))

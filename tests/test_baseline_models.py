@@ -8,6 +8,7 @@ import jax
 import numpy as np
 import optuna
 
+from ermrl.evolution.record import decode_study_record, encode_study_record
 from ermrl import storage
 from ermrl.cli import main
 from ermrl.evolution.config import EvolveConfig
@@ -25,7 +26,7 @@ def two_trial_study(journal):
     space = SearchSpace(1, fixed_iss=1.0)
     config = EvolveConfig(train=TrainConfig(env_id=ENV, total_timesteps=2048), space=space, trials=2, seeds=1)
     study = optuna.create_study(storage=make_storage(str(journal)), study_name="tiny", direction="maximize")
-    study.set_user_attr(ATTR, storage.encode_study_record(config))
+    study.set_user_attr(ATTR, encode_study_record(config))
     for params, value in (({"sr": 0.95, "lr": 0.5}, 20.0), ({"sr": 0.2, "lr": 0.9}, 10.0)):
         study.add_trial(optuna.trial.create_trial(params=params, distributions=space.distributions(), value=value))
     return study

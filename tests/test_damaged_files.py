@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from cli_runs import ermrl
+from ermrl.evolution.record import decode_study_record, encode_study_record
 from ermrl.errors import ConfigError
 
 STUDY = "k"
@@ -76,7 +77,7 @@ def _study_folder(folder: Path) -> None:
                           space=space, trials=4, seeds=1, popsize=2)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = optuna.create_study(storage=f"sqlite:///{folder / 'study.db'}", study_name=STUDY, direction="maximize")
-    study.set_user_attr(ATTR, storage.encode_study_record(config))
+    study.set_user_attr(ATTR, encode_study_record(config))
     for i, value in enumerate((20.0, 30.0, 25.0, 22.0)):
         params = {"sr": 0.5 + i / 10, "lr": 0.3, "iss": 1.0}
         study.add_trial(optuna.trial.create_trial(

@@ -18,7 +18,7 @@ from ermrl.agent import AgentConfig, Phi
 from ermrl.errors import RunFailed
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.evolve import evolve
-from ermrl.storage import decode_study_record, encode_study_record
+from ermrl.evolution.record import decode_study_record, encode_study_record
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
 from ermrl.training import Population, TrainConfig, train

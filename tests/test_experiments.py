@@ -9,6 +9,7 @@ import optuna
 import pytest
 from optuna.trial import TrialState
 
+from ermrl.evolution.record import decode_study_record, encode_study_record
 from ermrl.agent import AgentConfig, Phi
 from ermrl.evolution.study import load_study
 from ermrl.experiments import registry, runner
@@ -274,7 +275,7 @@ def test_select_says_when_trials_tie_at_its_cut(tmp_path):
     config = EvolveConfig(train=TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048), space=space,
                           trials=5, seeds=1)
     study = optuna.create_study(storage=make_storage(str(journal)), study_name="ties", direction="maximize")
-    study.set_user_attr(ATTR, storage.encode_study_record(config))
+    study.set_user_attr(ATTR, encode_study_record(config))
     for lr, value in ((0.5, 40.0), (0.6, 500.0), (0.7, 500.0), (0.8, 500.0), (0.9, 500.0)):
         study.add_trial(optuna.trial.create_trial(params={"sr": 0.95, "lr": lr}, distributions=space.distributions(),
                                                   value=value))

@@ -16,7 +16,7 @@ from ermrl.analysis.hp_map import (CSV_HEADER, StudyPoints, cross_study_hp_map, 
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
-from ermrl.storage import encode_study_record
+from ermrl.evolution.record import encode_study_record
 from ermrl.training import TrainConfig
 
 from cli_runs import ermrl

@@ -18,7 +18,7 @@ from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.evolve import Member, evolve, evolve_together
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_sampler, open_study
-from ermrl.storage import encode_study_record
+from ermrl.evolution.record import encode_study_record
 from ermrl.training import TrainConfig
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)

@@ -17,7 +17,7 @@ from cli_runs import COMMAND
 
 HMS = r"\d+:\d\d:\d\d"
 TRAIN_LINE = re.compile(rf"(?P<label>.+): (?P<done>[\d,]+)k/(?P<total>[\d,]+)k steps \((?P<pct>\d+)%\) \| "
-                        rf"(?P<rate>[\d,]+) agent-steps/s \| elapsed {HMS} \| ETA (?P<eta>{HMS})")
+                        rf"(?P<rate>[\d,]+) agent-steps/s \| elapsed {HMS} \+ compile \d+ s \| ETA (?P<eta>{HMS})")
 GEN_LINE = re.compile(rf"gen (?P<gen>\d+) \| (?P<completed>\d+)/(?P<trials>\d+) trials \| best (?P<best>.+?) \| "
                       rf"(training (?P<pct>\d+)% \| [\d,]+ agent-steps/s|generation done) \| study ETA (?P<eta>{HMS}|\?)")
 
@@ -81,8 +81,8 @@ def test_lines_are_held_back_to_one_per_interval_but_phase_ends_always_print():
         lines = out.getvalue().splitlines()
         assert lines[0] == "CartPole-v1: compiling"
         assert [re.search(r"\((\d+%)\)", line)[1] for line in lines[1:]] == shown
-        assert lines[-1] == ("CartPole-v1: 8k/8k steps (100%) | 4,096 agent-steps/s | elapsed 0:00:02 | "
-                             "ETA 0:00:00")
+        assert lines[-1] == ("CartPole-v1: 8k/8k steps (100%) | 4,096 agent-steps/s | elapsed 0:00:02 + compile "
+                             "10 s | ETA 0:00:00")
 
 
 def test_a_held_back_line_is_printed_when_the_display_closes():

@@ -14,7 +14,7 @@ from ermrl import provenance
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import SOFTWARE_ATTR, make_sampler, open_study
-from ermrl.storage import encode_study_record
+from ermrl.evolution.record import encode_study_record
 from ermrl.training import TrainConfig
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)

@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from ermrl.evolution.record import decode_study_record, encode_study_record
 from ermrl.agent import AgentConfig, Phi
 from ermrl.envs.spaces import ActionSpace
 from ermrl.errors import ConfigError
@@ -311,7 +312,7 @@ def tiny_study(env_id: str, backend: str = "auto"):
     config = EvolveConfig(train=TrainConfig(env_id=env_id, total_timesteps=2048, backend=backend), space=space,
                           trials=1, seeds=1)
     study = optuna.create_study(direction="maximize")
-    study.set_user_attr(ATTR, storage.encode_study_record(config))
+    study.set_user_attr(ATTR, encode_study_record(config))
     study.add_trial(optuna.trial.create_trial(params={"sr": 0.95, "lr": 0.5}, distributions=space.distributions(),
                                               value=20.0))
     return study

@@ -15,6 +15,7 @@ from optuna.distributions import FloatDistribution
 from optuna.trial import create_trial
 
 import ermrl
+from ermrl.evolution.record import decode_study_record, encode_study_record
 from ermrl import agent_files, envs, storage
 from ermrl.agent import Agent, AgentConfig, Phi
 from ermrl.errors import ConfigError
@@ -197,7 +198,7 @@ def test_the_test_phase_saves_every_model_agents(tmp_path):
     config = EvolveConfig(train=TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048),
                           space=SearchSpace(fixed_iss=1.0), trials=1, seeds=1)
     study = optuna.create_study(direction="maximize")
-    study.set_user_attr("ermrl", storage.encode_study_record(config))
+    study.set_user_attr("ermrl", encode_study_record(config))
     dists = {"sr": FloatDistribution(0.01, 10, log=True), "lr": FloatDistribution(0.01, 1, log=True)}
     study.add_trial(create_trial(params={"sr": 0.9, "lr": 0.4}, distributions=dists, value=1.0))
     from ermrl.experiments.evaluation import TestConfig, run_test_phase

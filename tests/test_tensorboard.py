@@ -14,7 +14,7 @@ from ermrl.analysis import tensorboard
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_sampler, open_study
-from ermrl.storage import encode_study_record
+from ermrl.evolution.record import encode_study_record
 from ermrl.training import TrainConfig
 from ermrl.training.results import WALL_S, Episodes, Results
 

@@ -25,7 +25,7 @@ from ermrl.evolution.heartbeat import WORKER_ATTR
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
 from ermrl.evolution.workers import Worker, WorkerConfig, worker_seed
-from ermrl.storage import encode_study_record
+from ermrl.evolution.record import encode_study_record
 from ermrl.training import TrainConfig
 
 from cli_runs import COMMAND, ermrl

@@ -9,13 +9,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ermrl.errors import ConfigError  # noqa: E402
-from ermrl.storage import save_figure  # noqa: E402
+from ermrl.errors import ConfigError
+from ermrl.storage import save_figure
 
 UNITS = 20
 """Reservoir units plotted by default."""
@@ -57,14 +55,15 @@ def plot_context(obs: np.ndarray, context: np.ndarray, path: Path | str, units: 
         raise ConfigError(f"units must be >= 1, got {units}")
     shown = min(units, context.shape[1])
     steps = np.arange(len(obs))
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, gridspec_kw={"height_ratios": [1, 1.6]})
+    fig = Figure(figsize=(8, 5.5))
+    top, bottom = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [1, 1.6]})
     labels = obs_labels or [f"o[{i}]" for i in range(obs.shape[1])]
     for i in range(obs.shape[1]):
         top.plot(steps, obs[:, i], lw=1.2, label=labels[i])
     top.set_ylabel("observation")
     top.legend(loc="upper right", fontsize=8, ncol=min(obs.shape[1], 6))
     top.grid(alpha=0.3)
-    colors = plt.cm.viridis(np.linspace(0, 1, shown))
+    colors = matplotlib.colormaps["viridis"](np.linspace(0, 1, shown))
     for j in range(shown):
         bottom.plot(steps, context[:, j], lw=0.8, color=colors[j])
     bottom.set_ylabel(f"reservoir state\n(first {shown} units)")

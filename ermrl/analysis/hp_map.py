@@ -12,19 +12,17 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import optuna
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import optuna  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-
-from ermrl import storage  # noqa: E402
-from ermrl.analysis.html import markdown_table  # noqa: E402
-from ermrl.analysis.report import phi, ranked  # noqa: E402
-from ermrl.errors import ConfigError  # noqa: E402
-from ermrl.evolution.study import ATTR  # noqa: E402
+from ermrl import storage
+from ermrl.analysis.html import markdown_table
+from ermrl.analysis.report import phi, ranked
+from ermrl.errors import ConfigError
+from ermrl.evolution import record as study_record
+from ermrl.evolution.study import ATTR
 
 MARKERS = ("o", "^", "s", "D", "v", "P")
 """Reservoir r (0-based) of a trial is drawn with ``MARKERS[r]``."""
@@ -73,7 +71,7 @@ def study_points(study: optuna.Study, top: int = 30) -> StudyPoints:
         raise ConfigError(f"top must be >= 1, got {top}")
     if ATTR not in study.user_attrs:
         raise ConfigError(f"study {study.study_name!r} was not made by `ermrl evolve` (no '{ATTR}' attribute)")
-    config = storage.decode_study_record(study.user_attrs[ATTR])
+    config = study_record.decode_study_record(study.user_attrs[ATTR])
     k = config.space.reservoirs
     rows = []
     for t in ranked(study):
@@ -162,9 +160,9 @@ def draw_hp_map(series: list[StudyPoints], path: Path | str, top: int = 30) -> P
     path = Path(path)
     fmt = path.suffix.lstrip(".").lower() or "png"
     ks = sorted({s.reservoirs for s in series})
-    fig, axes = plt.subplots(1, len(ks), figsize=(6.2 * len(ks), 5), sharex=True, sharey=True, squeeze=False)
+    fig = Figure(figsize=(6.2 * len(ks), 5))
+    axes = fig.subplots(1, len(ks), sharex=True, sharey=True, squeeze=False)
     if fmt not in fig.canvas.get_supported_filetypes():
-        plt.close(fig)
         raise ConfigError(f"cannot write a figure as .{fmt}; give a path ending in .png, .svg or .pdf")
     colours: dict[str, str] = {}
     for ax, k in zip(axes[0], ks):
@@ -192,7 +190,6 @@ def draw_hp_map(series: list[StudyPoints], path: Path | str, top: int = 30) -> P
     fig.tight_layout()
     with storage.atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format=fmt)
-    plt.close(fig)
     storage.write_csv(points_csv(path), CSV_HEADER, (
         [s.study, "+".join(s.envs), s.reservoirs, rank + 1, int(n), repr(float(v)), r + 1, repr(float(s.sr[rank, r])),
          repr(float(s.lr[rank, r]))]

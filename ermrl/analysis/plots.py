@@ -5,13 +5,10 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ermrl.storage import atomic_path  # noqa: E402
+from ermrl.storage import atomic_path
 
 
 def learning_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str, path: Path | str,
@@ -21,7 +18,8 @@ def learning_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str
     Writes ``path`` with each suffix in ``formats`` and returns the files written. The x values may be anything
     on the update grid (e.g. wall seconds), named by ``xlabel``.
     """
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
     for label, (steps, values) in curves.items():
         with warnings.catch_warnings():  # all-NaN columns before a seed's first episode
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -42,6 +40,5 @@ def learning_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str
         with atomic_path(out) as tmp:
             fig.savefig(tmp, dpi=120, format=fmt)
         written.append(out)
-    plt.close(fig)
     return written
 

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ermrl.agent import Agent, AgentConfig, Phi
+from ermrl.agent import Agent, AgentConfig, DEFAULT_PHI, Phi
 from ermrl.analysis.html import markdown_table
 from ermrl.envs import masking
 from ermrl.envs.host_backend import describe
@@ -32,7 +32,7 @@ from ermrl.envs.spaces import EnvInfo
 from ermrl.errors import ConfigError
 from ermrl.reservoir import ReservoirSpec
 
-MEMORY = Phi(0.95, 0.5, 1.0)
+MEMORY = DEFAULT_PHI
 """A reservoir with memory: the default Φ of :class:`ermrl.wrappers.ReservoirObservation`."""
 MEMORYLESS = Phi(1e-4, 1.0, 1.0)
 """No memory: with sr 1e-4 and leak rate 1, x_t ≈ tanh(Win u_t + b) depends on u_t alone."""
@@ -276,16 +276,14 @@ def probe_table(results: list[ProbeResult]) -> str:
 
 def plot_probe(results: list[ProbeResult], path: Path | str) -> Path:
     """Bar chart of each result's velocity R², and R² of o_(t+k) against k, side by side. Writes a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     from ermrl.storage import save_figure
 
     if not results:
         raise ConfigError("plot_probe needs at least one ProbeResult; run probe() first")
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    fig = Figure(figsize=(10, 4))
+    left, right = fig.subplots(1, 2)
     x = np.arange(len(results))
     left.bar(x, [r.r2_velocity for r in results], color=[f"C{i}" for i in x])
     left.set_xticks(x, [r.label for r in results], rotation=15)

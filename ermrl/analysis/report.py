@@ -13,16 +13,13 @@ import os
 import sys
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import optuna  # noqa: E402
-from matplotlib.cm import ScalarMappable  # noqa: E402
-from matplotlib.colors import Normalize  # noqa: E402
-from optuna.study import StudyDirection  # noqa: E402
-from optuna.trial import FrozenTrial, TrialState  # noqa: E402
+import numpy as np
+import optuna
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+from optuna.study import StudyDirection
+from optuna.trial import FrozenTrial, TrialState
 
 from ermrl import storage
 from ermrl.analysis.html import img as _img
@@ -104,7 +101,8 @@ def _save(fig, path: Path | str) -> Path:
 def fitness_over_trials(study: optuna.Study, path: Path | str) -> Path:
     """Fitness of each completed trial by trial number, failed trials as red x at the bottom, best-so-far line."""
     done, bad = completed(study), failed(study)
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
     if done:
         x = np.array([t.number for t in done])
         y = np.array([t.value for t in done])
@@ -135,7 +133,8 @@ def hp_map(study: optuna.Study, path: Path | str, top: int = 30) -> Path:
     k = n_reservoirs(study)
     trials = ranked(study)
     best = {t.number for t in trials[:top]}
-    fig, ax = plt.subplots(figsize=(6.5, 5))
+    fig = Figure(figsize=(6.5, 5))
+    ax = fig.subplots()
     if trials:
         values = np.array([t.value for t in trials])
         norm = Normalize(values.min(), values.max() if values.max() > values.min() else values.min() + 1)

@@ -92,16 +92,14 @@ def plot_spectra(named_signals: dict[str, np.ndarray], path: Path | str, dt: flo
                  half_width: int = HALF_WIDTH) -> Path:
     """Plots each (T,) signal's power spectrum (normalized to unit non-DC power, DC left out, log scale), its
     rhythm score in the legend. Writes ``path`` as a PNG and returns it."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     from ermrl.storage import save_figure
 
     if not named_signals:
         raise ConfigError("plot_spectra needs at least one signal, e.g. {'summed context': summed(states)}")
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
     for name, signal in named_signals.items():
         freqs, power = spectrum(signal, dt)
         total = power[1:].sum()

@@ -207,10 +207,8 @@ def performance_profile(scores: dict[str, np.ndarray], path: Path | str, thresho
                         seed: int = 0) -> Path:
     """Plots rliable's performance profiles, the fraction of runs whose normalized score exceeds τ with 95% CI
     bands, for {model: (n_runs, n_tasks)} into ``path`` (PNG), written atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
     from rliable import library, plot_utils
 
     from ermrl.storage import atomic_path
@@ -223,15 +221,15 @@ def performance_profile(scores: dict[str, np.ndarray], path: Path | str, thresho
         thresholds = np.linspace(min(lo, 0.0), max(hi, 1.0), 81)
     with _seeded(seed):
         profiles, cis = library.create_performance_profile(scores, thresholds, reps=reps)
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
     colors = {m: f"C{i}" for i, m in enumerate(scores)}
     plot_utils.plot_performance_profiles(profiles, thresholds, performance_profile_cis=cis, colors=colors, ax=ax,
                                          xlabel="normalized score (τ)", ylabel="fraction of runs with score > τ")
-    ax.legend([plt.Line2D([0], [0], color=c) for c in colors.values()], list(colors), fontsize=8)
+    ax.legend([Line2D([0], [0], color=c) for c in colors.values()], list(colors), fontsize=8)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
     return Path(path)
 
 

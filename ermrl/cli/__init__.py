@@ -13,7 +13,7 @@ import traceback
 from typing import NoReturn
 
 import ermrl
-from ermrl import compile_cache
+from ermrl import compile_cache, devices
 from ermrl.errors import TERMINATED, ConfigError, RunFailed, raise_terminated
 
 
@@ -176,8 +176,7 @@ def _run(argv: list[str] | None) -> int:
     try:
         args = parse(argv)
         command = f"ermrl {args.command}"
-        if ermrl.CPU_DEVICES_ERROR:
-            raise ConfigError(ermrl.CPU_DEVICES_ERROR)
+        devices.setup()  # one JAX CPU device per core, or a one-line error for a bad ERMRL_CPU_DEVICES
         compile_cache.enable()  # a second run of the same shapes reads its programs back instead of compiling
         return handlers[args.command](args)
     except ConfigError as e:

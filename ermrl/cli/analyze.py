@@ -175,6 +175,7 @@ def cmd_probe(args) -> int:
     import optuna
 
     from ermrl import storage
+    from ermrl.evolution import record as study_record
     from ermrl.agent import Phi
     from ermrl.analysis import probe
     from ermrl.envs import masking
@@ -198,7 +199,7 @@ def cmd_probe(args) -> int:
     rows += [(f"Φ {i + 1}", Phi(*v)) for i, v in enumerate(args.phi)]
     for name in dict.fromkeys(args.study):
         study = _load(name, args.storage)
-        config = storage.decode_study_record(study.user_attrs[ATTR])
+        config = study_record.decode_study_record(study.user_attrs[ATTR])
         if config.space.reservoirs and config.train.agent.spec.units != args.units:
             raise ConfigError(f"study {name!r} evolved {config.train.agent.spec.units}-unit reservoirs; "
                               f"pass --units {config.train.agent.spec.units}")

@@ -18,7 +18,9 @@ def add_parsers(sub, formatter) -> None:
                                    "effective config (JSON), episodes and curves (CSV), a summary and a learning-curve "
                                    "PNG into the run folder.", formatter_class=formatter)
     p.add_argument("--env", default="CartPoleNoVel-v1", help="env id; *NoVel-* ids delete the velocity dims")
-    for name, default in (("sr", 0.95), ("lr", 0.5), ("iss", 1.0)):
+    from ermrl.agent import DEFAULT_PHI
+
+    for name, default in DEFAULT_PHI._asdict().items():
         p.add_argument(f"--{name}", type=float, nargs="+", default=[default],
                        help={"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}[name]
                        + ", one value or one per reservoir")
@@ -238,6 +240,7 @@ def cmd_evolve(args) -> int:
     import optuna
 
     from ermrl import storage
+    from ermrl.evolution import record as study_record
     from ermrl.cli.progress import EvolutionBar
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.evolve import count, estimate_seconds, evolve, make_trainers
@@ -272,14 +275,14 @@ def cmd_evolve(args) -> int:
     storage_url = common.storage_url(args)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     check_writable(storage_url)  # a read-only storage, and a resumption with other settings, fail before any work
-    check_resumable(storage_url, name, storage.encode_study_record(config))
+    check_resumable(storage_url, name, study_record.encode_study_record(config))
     if config.normalized:
         config = baseline_runs.with_baselines(config, args.baselines, storage_url, name, print,
                                               allow_weak=args.allow_weak_baselines)
     sampler = make_sampler(args.sampler, config.generation_size, worker_seed(args.sampler_seed, worker.worker_index))
-    study = open_study(storage_url, name, sampler, storage.encode_study_record(config),
+    study = open_study(storage_url, name, sampler, study_record.encode_study_record(config),
                        heartbeat=(worker.heartbeat_interval, worker.grace_period))
-    stored = storage.decode_study_record(study.user_attrs[ATTR])
+    stored = study_record.decode_study_record(study.user_attrs[ATTR])
     config = dataclasses.replace(config, baselines=stored.baselines)  # a resumed study keeps its constants
     done = count(study, optuna.trial.TrialState.COMPLETE)
     print(f"study {name!r} in {shown_url(storage_url)}: {done}/{args.trials} trials done, "
@@ -328,6 +331,7 @@ def _converged(study, config, rule) -> str | None:
 
 def cmd_select(args) -> int:
     from ermrl import storage
+    from ermrl.evolution import record as study_record
     from ermrl.evolution.selection import ranked_trials, recorded_selection, select, ties_at_cut
     from ermrl.evolution.study import ATTR, check_writable, load_study
 
@@ -335,7 +339,7 @@ def cmd_select(args) -> int:
         raise ConfigError(f"--top and --seeds must be >= 1, got {args.top} and {args.seeds}")
     study = load_study(common.storage_url(args), args.study)
     check_writable(common.storage_url(args))  # the selection is recorded in the study
-    config = storage.decode_study_record(study.user_attrs[ATTR])
+    config = study_record.decode_study_record(study.user_attrs[ATTR])
     for env_id in config.env_ids:
         common.check_memory(config.train_for(env_id), min(args.top, len(study.trials)) * args.seeds,
                             "the selection")
@@ -364,6 +368,7 @@ def cmd_select(args) -> int:
 
 def cmd_test(args) -> int:
     from ermrl import storage
+    from ermrl.evolution import record as study_record
     from ermrl.analysis import tensorboard
     from ermrl.analysis.statistics import format_ci
     from ermrl.evolution.study import ATTR, load_study
@@ -381,7 +386,7 @@ def cmd_test(args) -> int:
 
         envs.describe(test.env_id)  # an unknown id or a missing simulator, before opening the study
     study = load_study(common.storage_url(args), args.study)
-    config = storage.decode_study_record(study.user_attrs[ATTR])
+    config = study_record.decode_study_record(study.user_attrs[ATTR])
     tested = config.train_for(test.env_id or config.env_ids[0])
     common.check_memory(tested, test.seeds * max(1, len(test.ermrl_lrs)), "the test phase")
     out = storage.check_folder(test_dir(common.run_dir(args), study.user_attrs[ATTR], test.env_id))

@@ -30,6 +30,7 @@ def cmd_convergence(args) -> int:
     from optuna.trial import TrialState
 
     from ermrl import storage
+    from ermrl.evolution import record as study_record
     from ermrl.analysis import spread
     from ermrl.evolution import convergence
     from ermrl.evolution.generations import ATTR as GENERATION
@@ -38,7 +39,7 @@ def cmd_convergence(args) -> int:
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     rule = convergence.Convergence(args.converged_width, args.converged_generations)
     study = load_study(common.storage_url(args), args.study)
-    config = storage.decode_study_record(study.user_attrs[ATTR])
+    config = study_record.decode_study_record(study.user_attrs[ATTR])
     if config.sampler != "cmaes":
         raise ConfigError(f"study {args.study!r} was sampled by {config.sampler}, which has no search distribution; "
                           "convergence is read from CMA-ES studies only")

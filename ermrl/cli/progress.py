@@ -87,11 +87,12 @@ class TrainingBar:
         if self._lines is not None:
             left = (p.total_agent_steps - p.agent_steps) / rate if rate > 0 else 0.0
             self._lines.offer(f"{self.description}: {steps} ({100 * p.agent_steps / p.total_agent_steps:.0f}%) | "
-                              f"{rate:,.0f} agent-steps/s | elapsed {_hms(p.elapsed_s)} | ETA {_hms(left)}",
-                              force=p.agent_steps >= p.total_agent_steps)
+                              f"{rate:,.0f} agent-steps/s | elapsed {_hms(p.elapsed_s)} + compile "
+                              f"{p.compile_s:.0f} s | ETA {_hms(left)}", force=p.agent_steps >= p.total_agent_steps)
             return
         self._bar.update(self._task, description=self.description, total=p.total_agent_steps,
-                         completed=p.agent_steps, rate=f"{rate:,.0f} agent-steps/s", steps=steps)
+                         completed=p.agent_steps, rate=f"{rate:,.0f} agent-steps/s (compiled in {p.compile_s:.0f} s)",
+                         steps=steps)
 
 
 class EvolutionBar:

@@ -310,9 +310,9 @@ def _check_study_database(storage_url: str, path: Path) -> None:
 def _current(record: dict) -> dict:
     """A stored record as this version writes it: decoded (fields added since it was written take their
     defaults) and encoded again, so that a study started before a config field existed still resumes."""
-    from ermrl import storage
+    from ermrl.evolution.record import decode_study_record, encode_study_record
 
-    return storage.encode_study_record(storage.decode_study_record(record))
+    return encode_study_record(decode_study_record(record))
 
 
 def _comparable(record: dict) -> str:

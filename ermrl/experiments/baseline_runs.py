@@ -93,12 +93,13 @@ def with_baselines(config, table_path: Path | None, storage_url: str, study_name
     already (a resumed study keeps the constants it started with), else from the table, computed if missing.
     Unless ``allow_weak``, refuses constants where PPO does not beat the random agent (``advice``: what to do)."""
     from ermrl import storage
+    from ermrl.evolution import record as study_record
     from ermrl.evolution.study import ATTR, load_study
 
     try:  # looking creates nothing
         record = load_study(storage_url, study_name).user_attrs[ATTR]
         if record.get("baselines"):
-            return dataclasses.replace(config, baselines=storage.decode_study_record(record).baselines)
+            return dataclasses.replace(config, baselines=study_record.decode_study_record(record).baselines)
     except ConfigError:  # no such study yet
         pass
     found = ensure(config.env_ids, config.train.total_timesteps, config.seeds, config.train.ppo.learning_rate,

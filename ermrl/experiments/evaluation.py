@@ -26,6 +26,7 @@ from ermrl.agent import AgentConfig, Phi
 from ermrl.analysis import statistics
 from ermrl.envs import masking
 from ermrl.errors import ConfigError
+from ermrl.evolution import record as study_record
 from ermrl.evolution.selection import chosen_trial
 from ermrl.evolution.study import ATTR
 from ermrl.experiments import baseline_models, checkpoints
@@ -157,7 +158,7 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
 
     ``on_results(label, results)`` is called with each model's :class:`~ermrl.training.results.Results` (its
     ``test.seeds`` agents), e.g. to write TensorBoard logs of its learning curves and PPO diagnostics."""
-    config = storage.decode_study_record(study.user_attrs[ATTR])
+    config = study_record.decode_study_record(study.user_attrs[ATTR])
     trial, phi, how = chosen_trial(study, config, test.trial)
     base, seeds, ppo_lr = _settings(config, test)
     envs.describe(base.env_id, config.train.backend)  # an unknown id fails before any training

@@ -13,6 +13,7 @@ from typing import Callable
 from ermrl import envs, storage
 from ermrl.agent import AgentConfig
 from ermrl.errors import ConfigError
+from ermrl.evolution import record as study_record
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.convergence import Convergence
 from ermrl.evolution.search_space import SearchSpace
@@ -273,8 +274,8 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
                 config = baseline_runs.with_baselines(config, baselines_table, url, p.study, log, progress,
                                                       allow_weak=scale.wiring_only, advice=WEAK_ADVICE)
             study = open_study(url, p.study, make_sampler(config.sampler, config.generation_size, config.sampler_seed),
-                               storage.encode_study_record(config))
-            stored = storage.decode_study_record(study.user_attrs[ATTR])
+                               study_record.encode_study_record(config))
+            stored = study_record.decode_study_record(study.user_attrs[ATTR])
             opened[p.study] = (dataclasses.replace(config, baselines=stored.baselines), study)
         return opened[p.study]
 

@@ -6,7 +6,7 @@ import dataclasses
 from typing import Literal
 
 from ermrl.errors import ConfigError
-from ermrl.storage import OMIT_WHEN_DEFAULT
+from ermrl.codec import OMIT_WHEN_DEFAULT
 
 
 MAX_EPOCHS = 1000

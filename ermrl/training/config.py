@@ -10,7 +10,7 @@ import numpy as np
 from ermrl.agent import AgentConfig, Phi
 from ermrl.errors import ConfigError
 from ermrl.ppo.config import PPOConfig
-from ermrl.storage import OMIT_WHEN_DEFAULT
+from ermrl.codec import OMIT_WHEN_DEFAULT
 
 
 MAX_TIMESTEPS = 1_000_000_000

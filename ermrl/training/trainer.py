@@ -16,6 +16,7 @@ from typing import Callable
 import jax
 import numpy as np
 
+from ermrl import devices as cpu_devices
 from ermrl import provenance
 from ermrl.agent import Phi
 from ermrl.envs import HostEnv
@@ -53,6 +54,8 @@ class Trainer:
 
     def __init__(self, config: TrainConfig, devices=None):
         self.config = config
+        if devices is None:
+            cpu_devices.setup()  # one CPU device per core, unless the process started JAX's backends before
         self.devices = list(devices if devices is not None else jax.devices())
         self.programs = programs_for(config, tuple(self.devices))
         self.fns, self.sharding = self.programs.fns, self.programs.sharding
