@@ -1,4 +1,4 @@
-"""The recurrent baseline against ER-MRL on the masked classic-control tasks (issue 10, item 7).
+"""The recurrent baseline against ER-MRL on the masked classic-control tasks.
 
 Models, each trained as its own population of --seeds agents (seeds 0..N-1), SB3-default PPO otherwise:
 - ``lstm``: PPO-LSTM (``PPOConfig.model = "lstm"``, sb3-contrib RecurrentPPO's policy, LSTM 64), lr 3e-4;

@@ -25,7 +25,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {ermrl.__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    formatter = argparse.ArgumentDefaultsHelpFormatter
+    formatter = HelpFormatter
     commands.add_parsers(sub, formatter)
     experiment.add_parser(sub, formatter)
     analyze.add_parser(sub, formatter)
@@ -34,6 +34,16 @@ def build_parser() -> argparse.ArgumentParser:
     dashboard.add_parser(sub, formatter)
     _add_debug(parser)
     return parser
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """argparse's "(default: ...)" after each option's help, except where there is no value to show: a default of
+    None (the option's text says what applies, e.g. the preset's value) or a switch that is off."""
+
+    def _get_help_string(self, action):
+        if action.default is None or action.default is False or action.default is argparse.SUPPRESS:
+            return action.help
+        return super()._get_help_string(action)
 
 
 class OneLineErrorParser(argparse.ArgumentParser):
@@ -78,13 +88,13 @@ def _subparser(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Arg
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
     """Parses ``argv``; a ``--config FILE`` gives defaults that the other flags override."""
-    from ermrl.cli import options
+    from ermrl.cli import config_files
 
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     args = _parse_all(parser, argv)
     if getattr(args, "config", None) is not None:
-        options.apply_config_file(_subparser(parser, argv), args.config)
+        config_files.apply_config_file(_subparser(parser, argv), args.config)
         args = _parse_all(parser, argv)
     return args
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
-import difflib
 import functools
 import inspect
 import textwrap
@@ -36,6 +35,13 @@ def field_docs(cls) -> dict[str, str]:
                 and isinstance(after.value, ast.Constant) and isinstance(after.value.value, str):
             docs[node.target.id] = " ".join(after.value.value.split())
     return docs
+
+
+def plain(doc: str) -> str:
+    """A docstring as help text: Sphinx roles (``:mod:`x` ``) and double backquotes dropped, keeping the names."""
+    import re
+
+    return re.sub(r"``([^`]*)``", r"\1", re.sub(r":\w+:`~?([^`]*)`", r"\1", doc))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,7 +69,7 @@ class Option:
         return f.default if f.default is not dataclasses.MISSING else f.default_factory()
 
     def add_to(self, parser: argparse.ArgumentParser) -> None:
-        doc = field_docs(self.owner).get(self.field, "") if self.owner else ""
+        doc = plain(field_docs(self.owner).get(self.field, "")) if self.owner else ""
         text = " ".join(p for p in (self.help, doc) if p).replace("%", "%%")
         kwargs = dict(self.kwargs)
         if kwargs.get("action") != "store_true":
@@ -323,100 +329,3 @@ def effective(args) -> dict:
     """Every option's final value (config file and flags applied), JSON-ready, for the run's record."""
     skip = {"command", "func", "config", "experiment_command", "debug"}
     return {k: (str(v) if isinstance(v, Path) else v) for k, v in sorted(vars(args).items()) if k not in skip}
-
-
-# -- config files ----------------------------------------------------------------------------------------
-
-
-def load_config_file(path: Path) -> dict:
-    """The table of a TOML or YAML config file; ConfigError (one line) when it cannot be read."""
-    if path.is_dir():
-        raise ConfigError(f"config file {path} is a folder; give the path of a .toml or .yaml file")
-    if not path.is_file():
-        raise ConfigError(f"config file {path} does not exist; give the path of a .toml or .yaml file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"config file {path} is not UTF-8 text (byte {e.start}); save it as UTF-8") from None
-    except OSError as e:
-        raise ConfigError(f"cannot read config file {path} ({e.strerror}); give a file you can read") from None
-    try:
-        if path.suffix == ".toml":
-            import tomllib
-
-            data = tomllib.loads(text)
-        elif path.suffix in (".yaml", ".yml"):
-            import yaml
-
-            data = yaml.safe_load(text) or {}
-        else:
-            raise ConfigError(f"config file {path} must end in .toml, .yaml or .yml")
-    except ConfigError:
-        raise
-    except Exception as e:  # tomllib.TOMLDecodeError, yaml.YAMLError
-        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise ConfigError(f"config file {path} is not valid {path.suffix[1:].upper()} ({first})") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"config file {path} must hold a table of option = value pairs")
-    return data
-
-
-def apply_config_file(parser: argparse.ArgumentParser, path: Path) -> None:
-    """Sets the values of ``path`` as ``parser``'s defaults, after checking each key and type."""
-    actions = {a.dest: a for a in parser._actions
-               if a.option_strings and a.dest not in ("help", "config", "debug", "version")}
-    values = {}
-    for key, value in load_config_file(path).items():
-        dest = str(key).lstrip("-").replace("-", "_")
-        if dest not in actions:
-            names = sorted(d.replace("_", "-") for d in actions)
-            close = difflib.get_close_matches(dest.replace("_", "-"), names, n=1, cutoff=0.75)
-            hint = f"did you mean {close[0]!r}?" if close else f"options here: {', '.join(names)}"
-            raise ConfigError(f"config file {path}: unknown option {key!r} for `{parser.prog}`; {hint}")
-        values[dest] = _convert(actions[dest], value, path, key)
-    parser.set_defaults(**values)
-
-
-def _convert(action: argparse.Action, value, path: Path, key: str):
-    """A config file's ``value`` for ``action``, checked and converted as argparse would the flag's words."""
-    where = f"config file {path}: {key}"
-    if isinstance(action, (argparse._StoreTrueAction, argparse.BooleanOptionalAction)):
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where} must be true or false, got {value!r}")
-        return value
-    if isinstance(action, argparse._AppendAction):  # repeatable: a list of occurrences, or one
-        one = not isinstance(value, list) or (isinstance(action.nargs, int) and not any(isinstance(v, list) for v in value))
-        return [_values(action, v, where) for v in ([value] if one else value)]
-    return _values(action, value, where)
-
-
-def _values(action: argparse.Action, value, where: str):
-    """One occurrence of a flag: a scalar, or a list for nargs '+', '*' or N."""
-    n = action.nargs
-    if n in ("+", "*") or isinstance(n, int):
-        items = value if isinstance(value, list) else [value]
-        if isinstance(n, int) and len(items) != n:
-            raise ConfigError(f"{where} takes {n} values, got {value!r}")
-        if n == "+" and not items:
-            raise ConfigError(f"{where} takes at least one value, got an empty list")
-        return [_scalar(action, item, where) for item in items]
-    if isinstance(value, list):
-        raise ConfigError(f"{where} takes one value, got a list {value!r}")
-    return _scalar(action, value, where)
-
-
-def _scalar(action: argparse.Action, item, where: str):
-    need = {int: "an integer", float: "a number"}.get(action.type)
-    if action.type is int and isinstance(item, float):
-        raise ConfigError(f"{where} must be an integer, got {item!r}")
-    if need and isinstance(item, (bool, list, dict)) or isinstance(item, (list, dict)):
-        raise ConfigError(f"{where} has the wrong type: {item!r}; give {need or 'one value'}")
-    if action.type is not None and not (isinstance(item, str) and item == "auto"):
-        try:
-            item = action.type(item)
-        except (TypeError, ValueError, argparse.ArgumentTypeError) as e:
-            fix = f"give {need}" if need else str(e) if isinstance(e, argparse.ArgumentTypeError) else "see --help"
-            raise ConfigError(f"{where} has the wrong type: {item!r}; {fix}") from None
-    if action.choices is not None and item not in action.choices:
-        raise ConfigError(f"{where} must be one of {', '.join(map(str, action.choices))}, got {item!r}")
-    return item

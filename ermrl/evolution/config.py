@@ -39,6 +39,8 @@ class EvolveConfig:
     popsize: int | None = None
     """Trials per generation; None takes CMA-ES's default 4 + ⌊3 ln n⌋."""
     sampler_seed: int | None = 0
+    """Seed of the sampler's draws (worker i > 0 of a study draws from this seed and i); the same seed and trials
+    give the same candidates."""
     seed_schedule: str = "fixed"
     """Which seeds (reservoir draws, policy inits, envs) evaluate a trial: 'fixed', seeds 0..S−1 for every trial
     (the paper's code), or 'generation', new seeds for each generation, shared by its trials so that CMA-ES still
