@@ -15,7 +15,7 @@ episodes) and can write a JSON.
 
 Example:
     .venv-ref/bin/python benchmarks/peer_reservoir_draws.py --agents 10 --timesteps 300000 \\
-        --sr 0.508 --lr 0.0568 --bias bernoulli --json out.json
+        --sr 0.508 --leak-rate 0.0568 --bias bernoulli --json out.json
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     p.add_argument("--first-seed", type=int, default=0, help="first seed (default: %(default)s)")
     p.add_argument("--timesteps", type=int, default=300000, help="env steps per agent (default: %(default)s)")
     p.add_argument("--sr", type=float, required=True, help="spectral radius")
-    p.add_argument("--lr", type=float, required=True, help="leak rate")
+    p.add_argument("--leak-rate", dest="lr", type=float, required=True, help="leak rate")
     p.add_argument("--iss", type=float, default=1.0, help="input scaling (default: %(default)s)")
     p.add_argument("--bias", choices=("none", "bernoulli"), default="bernoulli",
                    help="the reservoir's bias (default: %(default)s)")

@@ -6,17 +6,17 @@ observation is replaced by the state of a ReservoirPy reservoir fed with
 concat(obs, action encoding, reward) at every step. One process per agent (seeds
 0..A-1, or from ``--first-seed``), at most ``--procs`` at a time. Prints agent-steps/s and each
 agent's fitness (the mean return of its last 10 training episodes, as ermrl's), and can write a JSON.
-``--sr/--lr/--iss`` set the reservoir's Φ (default: the paper's sr 0.95, lr 0.5, iss 1.0), so that a Φ*
+``--sr/--leak-rate/--iss`` set the reservoir's Φ (default: the paper's sr 0.95, lr 0.5, iss 1.0), so that a Φ*
 evolved by ermrl can be trained by the reference stack (peer agreement, docs/paper.md); ``--bias bernoulli``
 gives the reservoir ReservoirPy 0.3's bias (the paper's era and ermrl's default), which 0.4 dropped.
 
 Examples:
     python benchmarks/reference_pipeline.py --env CartPoleNoVel-v1 --agents 4 \\
         --timesteps 20000 --procs 2 --json out.json
-    python benchmarks/reference_pipeline.py --agents 4 --timesteps 300000 --sr 0.756 --lr 0.0886 --iss 1.0 \\
+    python benchmarks/reference_pipeline.py --agents 4 --timesteps 300000 --sr 0.756 --leak-rate 0.0886 --iss 1.0 \\
         --bias bernoulli
     python benchmarks/reference_pipeline.py --agents 10 --first-seed 1000 --timesteps 300000 --sr 0.508 \\
-        --lr 0.0568 --bias bernoulli --weights ermrl      # SB3 on the reservoirs ermrl trained with those seeds
+        --leak-rate 0.0568 --bias bernoulli --weights ermrl      # SB3 on the reservoirs ermrl trained with those seeds
 """
 
 from __future__ import annotations
@@ -139,7 +139,7 @@ def main(argv=None) -> int:
     p.add_argument("--procs", type=int, default=2, help="max worker processes at a time (default: %(default)s)")
     p.add_argument("--first-seed", type=int, default=0, help="seed of the first agent (default: %(default)s)")
     p.add_argument("--sr", type=float, default=0.95, help="spectral radius (default: %(default)s)")
-    p.add_argument("--lr", type=float, default=0.5, help="leak rate (default: %(default)s)")
+    p.add_argument("--leak-rate", dest="lr", type=float, default=0.5, help="leak rate (default: %(default)s)")
     p.add_argument("--iss", type=float, default=1.0, help="input scaling (default: %(default)s)")
     p.add_argument("--bias", choices=("none", "bernoulli"), default="none",
                    help="the reservoir's bias: none (ReservoirPy 0.4) or bernoulli (0.3, the paper's, and ermrl's "

@@ -293,7 +293,7 @@ step_fitness_1m() {  # the CartPole and Pendulum targets, a diagnostic: evolutio
     }
   done
   # the default Φ (sr 0.95, lr 0.5, iss 1), not evolved, on the same test seeds: what the Pendulum evolutions miss
-  [ -f "$d/default-phi-pendulum/summary.json" ] || "$E" train --env PendulumNoVel-v1 --sr 0.95 --lr 0.5 --iss 1.0 \
+  [ -f "$d/default-phi-pendulum/summary.json" ] || "$E" train --env PendulumNoVel-v1 --sr 0.95 --leak-rate 0.5 --iss 1.0 \
       --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet \
       --out "$d/default-phi-pendulum"
 }
@@ -315,7 +315,7 @@ step_sizes_medium() {  # C14 and the Pendulum target: PendulumNoVel at 500 and 1
   # selected and tested on one H200 (≈ 5 min), the 1000-unit one evolved and selected there (≈ 5 min) and tested here
   run reservoir-sizes medium --only pendulum-500u pendulum-1000u "${TEST10[@]}"
   local d=docs/data/reservoir-sizes-medium s=docs/data/reservoir-sizes-small
-  [ -f "$d/default-phi-500u/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 \
+  [ -f "$d/default-phi-500u/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 \
       --iss 1.0 --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet \
       --out "$d/default-phi-500u"
   .venv/bin/python benchmarks/variant_summary.py "500 units=$d/pendulum-500u/test/summary.json" \
@@ -354,7 +354,7 @@ step_pendulum_paper_500u_interim() {  # a diagnostic of step `pendulum_paper_500
   # compared with the `medium` 500-unit Φ* and the default Φ at 500 units (step `sizes_medium`)
   local d=docs/data/reservoir-sizes-paper/interim-trial55 m=docs/data/reservoir-sizes-medium
   [ -f "$d/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 --sr 0.06239118054509163 \
-      --lr 0.11866375803947449 --iss 1.0 --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 \
+      --leak-rate 0.11866375803947449 --iss 1.0 --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 \
       --no-save-agents --quiet --out "$d"
   .venv/bin/python benchmarks/variant_summary.py "paper-scale best after 150 trials=$d/summary.json" \
       "medium Φ*=$m/pendulum-500u/test/summary.json" "default Φ=$m/default-phi-500u/summary.json" \
@@ -385,7 +385,7 @@ step_pendulum_500u_near_default() {  # the Pendulum target, a departure from the
   # at 500 units and the 3e-4-evolved `medium` Φ*. ≈ 26 min a generation here (alone); resumes by generations
   local s=pendulum-500u-near-default d=docs/data/pendulum-500u-near-default m=docs/data/reservoir-sizes-medium phi
   "$E" evolve --env PendulumNoVel-v1 --units 500 --reservoirs 1 --fixed-iss 1.0 --trials 18 --seeds 3 \
-      --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-lr 0.1 --max-lr 1.0 \
+      --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
       --study "$s" --storage "$d/studies.log" --out "runs/$s" --quiet
   "$E" select --study "$s" --storage "$d/studies.log" --out "runs/$s" --top 3 --seeds 3 --quiet
   phi=$(phi_flags "$d/studies.log" "$s")
@@ -425,7 +425,7 @@ step_pendulum_500u_near_default_wide_50() {  # the Pendulum target: step pendulu
   mkdir -p "$d"
   [ -f "$d/studies.log" ] || cp "docs/data/$s/studies.log" "$d/studies.log"
   "$E" evolve --env PendulumNoVel-v1 --units 500 --reservoirs 1 --fixed-iss 1.0 --trials 50 --seeds 8 --popsize 10 \
-      --seed-schedule generation --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-lr 0.1 --max-lr 1.0 \
+      --seed-schedule generation --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
       --study "$s" --storage "$d/studies.log" --out "runs/$s-50" --batch 2 --quiet
   "$E" select --study "$s" --storage "$d/studies.log" --out "runs/$s-50" --top 4 --seeds 8 --quiet | tee "$d/selection.txt"
   if [ "$(phi_flags "$d/studies.log" "$s")" = "$(phi_flags "docs/data/$s/studies.log" "$s")" ]; then
@@ -450,7 +450,7 @@ step_pendulum_500u_more_seeds() {  # the Pendulum target, a diagnostic: the 8-se
   # shellcheck disable=SC2046
   [ -f "$d/evolved/summary.json" ] || "$E" train "${more[@]}" $(phi_flags "docs/data/$s/studies.log" "$s") \
       --out "$d/evolved"
-  [ -f "$d/default/summary.json" ] || "$E" train "${more[@]}" --sr 0.95 --lr 0.5 --iss 1.0 --out "$d/default"
+  [ -f "$d/default/summary.json" ] || "$E" train "${more[@]}" --sr 0.95 --leak-rate 0.5 --iss 1.0 --out "$d/default"
   .venv/bin/python benchmarks/variant_summary.py "evolved near the default, 8 seeds=$d/evolved/summary.json" \
       "default Φ=$d/default/summary.json" --compare "evolved near the default, 8 seeds" "default Φ" \
       --title "500 units, seeds 1010-1019" --figure "$d/pendulum.png" | tee "$d/summary.md"
@@ -481,7 +481,7 @@ near_default_wide() {  # near_default_wide UNITS: the CMA-ES of step pendulum_50
   # 1M, then the Φ* trained on the test seeds with its agents saved (the model step deterministic_eval evaluates)
   local s="pendulum-$1u-near-default-wide"
   "$E" evolve --env PendulumNoVel-v1 --units "$1" --reservoirs 1 --fixed-iss 1.0 --trials 40 --seeds 8 --popsize 10 \
-      --seed-schedule generation --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-lr 0.1 --max-lr 1.0 \
+      --seed-schedule generation --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
       --study "$s" --storage "docs/data/$s/studies.log" --out "runs/$s" --quiet
   "$E" select --study "$s" --storage "docs/data/$s/studies.log" --out "runs/$s" --top 4 --seeds 8 --quiet
   # shellcheck disable=SC2046
@@ -521,7 +521,7 @@ step_probe() {  # H1, C4: velocity R² of each H1 study's Φ*, against the defau
         --out "docs/data/$data/probe/$name.png"
   done
 }
-phi_flags() {  # phi_flags STORAGE STUDY: the study's Φ* (selected, else best) as `--sr .. --lr .. --iss ..`
+phi_flags() {  # phi_flags STORAGE STUDY: the study's Φ* (selected, else best) as `--sr .. --leak-rate .. --iss ..`
   .venv/bin/python - "$1" "$2" <<'PY'
 import sys
 
@@ -531,7 +531,8 @@ from ermrl.evolution.study import ATTR, load_study
 
 study = load_study(sys.argv[1], sys.argv[2])
 trial, phi, how = chosen_trial(study, decode_study_record(study.user_attrs[ATTR]), None)
-print(" ".join(f"--{f} " + " ".join(repr(float(v)) for v in getattr(phi, f)) for f in ("sr", "lr", "iss")))
+flags = {"sr": "--sr", "lr": "--leak-rate", "iss": "--iss"}
+print(" ".join(f"{flags[f]} " + " ".join(repr(float(v)) for v in getattr(phi, f)) for f in ("sr", "lr", "iss")))
 PY
 }
 
@@ -608,7 +609,7 @@ step_deterministic_eval() {  # the targets on rl-zoo's metric: the agents of the
   # 50 fresh episodes (`ermrl analyze evaluate`), beside its training score (final). ≈ 13 min a 500-unit Pendulum
   # model here, ≈ 5 min a CartPole one, ≈ 3 min a PPO baseline
   local d=docs/data/deterministic-eval
-  train_saved "$d/pendulum-default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 --iss 1.0 --ppo-lr 1e-4
+  train_saved "$d/pendulum-default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 --iss 1.0 --ppo-lr 1e-4
   # shellcheck disable=SC2046
   train_saved "$d/pendulum-medium-500u" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 \
       $(phi_flags docs/data/reservoir-sizes-medium/studies.log reservoir-sizes-medium-pendulum-500u)
@@ -618,7 +619,7 @@ step_deterministic_eval() {  # the targets on rl-zoo's metric: the agents of the
     train_saved "$d/pendulum-$s" --env PendulumNoVel-v1 --units "$(case $s in lr1e-4 | 100u-*) echo 100 ;; *) echo 500 ;; esac)" \
         --ppo-lr 1e-4 $(phi_flags "docs/data/pendulum-$s/studies.log" "pendulum-$s")
   done
-  train_saved "$d/pendulum-default-phi" --env PendulumNoVel-v1 --sr 0.95 --lr 0.5 --iss 1.0 --ppo-lr 1e-4
+  train_saved "$d/pendulum-default-phi" --env PendulumNoVel-v1 --sr 0.95 --leak-rate 0.5 --iss 1.0 --ppo-lr 1e-4
   train_saved "$d/pendulum-ppo" --env PendulumNoVel-v1 --no-reservoir --ppo-lr 3e-4
   train_saved "$d/pendulum-ppo-full-obs" --env Pendulum-v1 --no-reservoir --ppo-lr 3e-4
   # shellcheck disable=SC2046
@@ -658,7 +659,7 @@ step_pendulum_rlzoo_ppo() {  # the Pendulum target, a diagnostic of its PPO sett
     # shellcheck disable=SC2046
     train_saved "$d/evolved-${s}u" --env PendulumNoVel-v1 --units "$s" "${zoo[@]}" \
         $(phi_flags "docs/data/pendulum-${s}u-near-default-wide/studies.log" "pendulum-${s}u-near-default-wide")
-    train_saved "$d/default-phi-${s}u" --env PendulumNoVel-v1 --units "$s" --sr 0.95 --lr 0.5 --iss 1.0 "${zoo[@]}"
+    train_saved "$d/default-phi-${s}u" --env PendulumNoVel-v1 --units "$s" --sr 0.95 --leak-rate 0.5 --iss 1.0 "${zoo[@]}"
   done
   train_saved "$d/ppo" --env PendulumNoVel-v1 --no-reservoir "${zoo[@]}"
   train_saved "$d/ppo-full-obs" --env Pendulum-v1 --no-reservoir "${zoo[@]}"
@@ -697,7 +698,7 @@ step_pendulum_normalize() {  # the Pendulum target, a diagnostic of input normal
              --timesteps 1000000 --no-save-agents --quiet)
   # shellcheck disable=SC2086
   [ -f "$d/dev/evolved/summary.json" ] || "$E" train "${dev[@]}" $phi --out "$d/dev/evolved"
-  [ -f "$d/dev/default/summary.json" ] || "$E" train "${dev[@]}" --sr 0.95 --lr 0.5 --iss 1.0 --out "$d/dev/default"
+  [ -f "$d/dev/default/summary.json" ] || "$E" train "${dev[@]}" --sr 0.95 --leak-rate 0.5 --iss 1.0 --out "$d/dev/default"
   rm -f "$d"/dev/*/episodes.csv
   .venv/bin/python benchmarks/variant_summary.py "evolved, normalized=$d/dev/evolved/summary.json" \
       "evolved=$m/evolved/summary.json" "default Φ, normalized=$d/dev/default/summary.json" \
@@ -706,7 +707,7 @@ step_pendulum_normalize() {  # the Pendulum target, a diagnostic of input normal
       --figure "$d/dev/pendulum.png" | tee "$d/dev/summary.md"
   # shellcheck disable=SC2086
   train_saved "$d/evolved-500u" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 --normalize $phi
-  train_saved "$d/default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 --iss 1.0 --ppo-lr 1e-4 \
+  train_saved "$d/default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 --iss 1.0 --ppo-lr 1e-4 \
       --normalize
   train_saved "$d/ppo" --env PendulumNoVel-v1 --no-reservoir --normalize
   train_saved "$d/ppo-full-obs" --env Pendulum-v1 --no-reservoir --normalize
@@ -742,7 +743,7 @@ step_pendulum_rlzoo_sde() {  # the Pendulum target, rl-zoo's PendulumNoVel recip
   rm -f "$d/dev/evolved/episodes.csv"
   # shellcheck disable=SC2086
   train_saved "$d/evolved-500u" --env PendulumNoVel-v1 --units 500 "${zoo[@]}" --normalize $phi
-  train_saved "$d/default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 --iss 1.0 "${zoo[@]}" \
+  train_saved "$d/default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 --iss 1.0 "${zoo[@]}" \
       --normalize
   train_saved "$d/ppo" --env PendulumNoVel-v1 --no-reservoir "${zoo[@]}" --normalize
   train_saved "$d/ppo-full-obs" --env Pendulum-v1 --no-reservoir "${zoo[@]}" --normalize
@@ -790,7 +791,7 @@ step_pendulum_rlzoo_policy() {  # the Pendulum target, rl-zoo's PendulumNoVel po
     local -n flags=$v
     # shellcheck disable=SC2086
     train_saved "$d/evolved-$v" --env PendulumNoVel-v1 --units 500 "${flags[@]}" $phi
-    train_saved "$d/default-phi-$v" --env PendulumNoVel-v1 --units 500 --sr 0.95 --lr 0.5 --iss 1.0 "${flags[@]}"
+    train_saved "$d/default-phi-$v" --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 --iss 1.0 "${flags[@]}"
   done
   .venv/bin/python benchmarks/variant_summary.py "evolved, zoo policy=$d/evolved-zoo/summary.json" \
       "evolved, paper + zoo policy=$d/evolved-paper/summary.json" \
@@ -810,7 +811,7 @@ step_pendulum_rlzoo_policy() {  # the Pendulum target, rl-zoo's PendulumNoVel po
   local first
   for first in 1010 1020; do
     [ -f "$d/confirm/default-phi-zoo-$first/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 \
-        --sr 0.95 --lr 0.5 --iss 1.0 "${zoo[@]}" --seeds 10 --first-seed "$first" --timesteps 1000000 \
+        --sr 0.95 --leak-rate 0.5 --iss 1.0 "${zoo[@]}" --seeds 10 --first-seed "$first" --timesteps 1000000 \
         --no-save-agents --quiet --out "$d/confirm/default-phi-zoo-$first"
     rm -f "$d/confirm/default-phi-zoo-$first/episodes.csv"
   done
@@ -833,7 +834,7 @@ step_pendulum_rlzoo_evolve() {  # the Pendulum target, ER-MRL proper under rl-zo
   local zoo=("${RLZOO_PENDULUM[@]}" "${RLZOO_POLICY[@]}")
   mkdir -p "$d"
   "$E" evolve --env PendulumNoVel-v1 --units 500 --reservoirs 1 --fixed-iss 1.0 --trials 30 --seeds 3 --popsize 10 \
-      --seed-schedule generation --timesteps 300000 "${zoo[@]}" --min-sr 0.1 --max-sr 10 --min-lr 0.1 --max-lr 1.0 \
+      --seed-schedule generation --timesteps 300000 "${zoo[@]}" --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
       --study "$s" --storage "$d/studies.log" --out "runs/$s" --quiet
   "$E" select --study "$s" --storage "$d/studies.log" --out "runs/$s" --top 3 --seeds 5 --quiet | tee "$d/selection.txt"
   # shellcheck disable=SC2046

@@ -26,7 +26,12 @@ CASES = [
     ("train --iss -1", "ermrl train: error: --iss must be positive and finite, got [-1.0]"),
     ("train --iss 1e38", "ermrl train: error: --iss must be <= 1e+06 (the reservoir's float32 sums stay finite), got "
                          "[9.999999680285692e+37]"),
-    ("train --lr 0", "ermrl train: error: --lr must be positive and finite, got [0.0]"),
+    ("train --leak-rate 0", "ermrl train: error: --leak-rate must be positive and finite, got [0.0]"),
+    ("train --lr 3e-4", "ermrl train: error: --lr is ambiguous: the reservoir's leak rate is --leak-rate, PPO's "
+                        "learning rate is --ppo-lr (ER-MRL's in a test phase: --ermrl-lr); see `ermrl train --help`"),
+    ("evolve --min-lr 0.1", "ermrl evolve: error: --min-lr is ambiguous: the reservoir's leak rate is "
+                            "--min-leak-rate, PPO's learning rate is --ppo-lr (ER-MRL's in a test phase: --ermrl-lr); "
+                            "see `ermrl evolve --help`"),
     ("train --env CartPolee-v1", "ermrl train: error: unknown env id 'CartPolee-v1': Gymnasium has no "
                                  "'CartPolee-v1'; did you mean CartPole-v1, CartPole-v0, CartPoleNoVel-v1?"),
     ("train --env Blackjack-v1", "ermrl train: error: env 'Blackjack-v1' has observation space Tuple(Discrete(32), "
@@ -229,7 +234,8 @@ CASES = [
                             "(log-uniform)"),
     ("evolve --min-sr 10 --max-sr 1", "ermrl evolve: error: bad sr bounds [10.0, 1.0]: need 0 < --min-sr < --max-sr "
                                       "(log-uniform)"),
-    ("evolve --max-lr 2", "ermrl evolve: error: bad lr bounds [0.01, 2.0]: a leak rate is at most 1; use --max-lr 1"),
+    ("evolve --max-leak-rate 2", "ermrl evolve: error: bad lr bounds [0.01, 2.0]: a leak rate is at most 1; use "
+                                 "--max-leak-rate 1"),
     ("evolve --fixed-iss nan", "ermrl evolve: error: --fixed-iss must be positive, got nan"),
     ("evolve --reservoirs 0", "ermrl evolve: error: evolution needs at least 1 reservoir, got 0"),
     ("evolve --normalization minmax", "ermrl evolve: error: argument --normalization: invalid choice: 'minmax' "

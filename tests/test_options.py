@@ -166,3 +166,21 @@ def test_ppo_settings_are_checked_together():
     assert (ppo.model, ppo.batch_size, ppo.lstm_seq_len) == ("lstm", 128, 128)
     with pytest.raises(ConfigError, match="^batch_size 64 must be a multiple of lstm_seq_len 128"):
         options.ppo_config(parse(["train", "--model", "lstm", "--lstm-seq-len", "128"]))
+
+
+def test_an_old_config_file_with_lr_still_sets_the_leak_rate_and_the_new_names_work(tmp_path):
+    """`lr = 0.3` in a config file written before the flag was renamed keeps its meaning (the value's name is
+    still `lr`); `leak-rate = 0.3` and `--spectral-radius` say the same; `--lr` on the command line is refused."""
+    from ermrl.cli import parse
+
+    old = tmp_path / "old.toml"
+    old.write_text("lr = 0.3\n")
+    old_search = tmp_path / "old_search.toml"
+    old_search.write_text("min-lr = 0.05\n")
+    new = tmp_path / "new.toml"
+    new.write_text("leak-rate = 0.3\n")
+    assert parse(["train", "--config", str(old)]).lr == [0.3]
+    assert parse(["train", "--config", str(new)]).lr == [0.3]
+    assert parse(["train", "--spectral-radius", "0.7"]).sr == [0.7]
+    assert parse(["evolve", "--config", str(old_search)]).min_lr == 0.05
+    assert parse(["evolve", "--min-leak-rate", "0.05"]).min_lr == 0.05

@@ -104,7 +104,7 @@ def test_every_told_generation_prints_a_line():
     lines = out.getvalue().splitlines()
     assert all(GEN_LINE.fullmatch(line) for line in lines), lines
     assert [GEN_LINE.fullmatch(line)["pct"] or "done" for line in lines] == ["50", "100", "done", "100", "done"]
-    assert lines[2].startswith("gen 0 | 2/4 trials | best 20.0 (sr 0.5, lr 0.1) | generation done")
+    assert lines[2].startswith("gen 0 | 2/4 trials | best 20.0 (sr 0.5, leak rate 0.1) | generation done")
     assert lines[-1].endswith("study ETA 0:00:00")
 
 

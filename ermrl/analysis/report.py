@@ -30,6 +30,8 @@ from ermrl.analysis.statistics import format_ci
 from ermrl.errors import ConfigError
 
 MARKERS = ("o", "^", "s", "D", "v", "P", "*", "X")
+PHI_NAMES = {"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}
+"""Φ's fields as a reader reads them; in RL, "lr" is a learning rate."""
 
 
 def _maximize(study: optuna.Study) -> bool:
@@ -204,7 +206,7 @@ def test_phase_section(test_dir: Path, run_dir: Path) -> list[str]:
     fig = _test_figure(test_dir, run_dir)
     if fig is not None:
         parts.append(_img(fig, f"test phase on {env_id}"))
-    parts.append(_table(["model", "lr", "seeds", "final mean ± std", "final IQM [95% CI]", "diverged", "AUC mean ± std"], [
+    parts.append(_table(["model", "learning rate", "seeds", "final mean ± std", "final IQM [95% CI]", "diverged", "AUC mean ± std"], [
         [r.get("model", ""), r.get("learning_rate"), r.get("n_seeds"), _pm(r.get("final_mean"), r.get("final_std")),
          format_ci(r.get("final_iqm"), r.get("final_iqm_low"), r.get("final_iqm_high")), r.get("diverged", 0),
          _pm(r.get("auc_mean"), r.get("auc_std"))] for r in rows]))
@@ -332,7 +334,7 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
         parts += ["<h2>Best &Phi;</h2>",
                   _table(["trial", "fitness", "generation"], [[t.number, t.value, t.user_attrs.get("generation", "")]]),
                   _table(["param", "value"], [[n, v] for n, v in t.params.items()]),
-                  _table(["reservoir"] + list(p), [[r + 1] + [p[n][r] for n in p] for r in range(k)
+                  _table(["reservoir"] + [PHI_NAMES.get(n, n) for n in p], [[r + 1] + [p[n][r] for n in p] for r in range(k)
                                                     if all(len(p[n]) > r for n in p)])]
         seeds = t.user_attrs.get("seed_fitness", [])
         if seeds:

@@ -20,10 +20,11 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--env", default="CartPoleNoVel-v1", help="env id; *NoVel-* ids delete the velocity dims")
     from ermrl.agent import DEFAULT_PHI
 
+    flags = {"sr": ("--sr", "--spectral-radius"), "lr": ("--leak-rate",), "iss": ("--iss", "--input-scaling")}
     for name, default in DEFAULT_PHI._asdict().items():
-        p.add_argument(f"--{name}", type=float, nargs="+", default=[default],
-                       help={"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}[name]
-                       + ", one value or one per reservoir")
+        p.add_argument(*flags[name], dest=name, type=float, nargs="+", default=[default], metavar=name.upper(),
+                       help=f"{options.PHI_NAMES[name]}, one value or one per reservoir")
+    options.refuse_lr(p, "--lr", "--leak-rate")
     p.add_argument("--seeds", type=int, default=3, help="number of seeds (FIRST..FIRST+N-1)")
     p.add_argument("--first-seed", type=int, default=0, metavar="FIRST",
                    help="the first seed: e.g. 1000 trains on seeds no evolution used (they use 0..S-1)")
@@ -102,11 +103,15 @@ MAX_SCALE = 1e6
 # -- train and plot --------------------------------------------------------------------------------------
 
 
+FLAGS = {"sr": "--sr", "lr": "--leak-rate", "iss": "--iss"}
+"""The flag that sets each field of Φ in ``ermrl train``."""
+
+
 def _phi_values(name: str, values: list[float], k: int) -> list[float]:
     if len(values) == 1:
         return values * k
     if len(values) != k:
-        raise ConfigError(f"--{name} got {len(values)} values for {k} reservoirs; give one value or {k}")
+        raise ConfigError(f"{FLAGS[name]} got {len(values)} values for {k} reservoirs; give one value or {k}")
     return values
 
 
@@ -115,12 +120,12 @@ def _check_phi(phi) -> None:
 
     for name, v in zip(("sr", "lr", "iss"), phi):
         if not np.all(np.isfinite(v)) or np.any(v <= 0):
-            raise ConfigError(f"--{name} must be positive and finite, got {v.tolist()}")
+            raise ConfigError(f"{FLAGS[name]} must be positive and finite, got {v.tolist()}")
     if np.any(phi.lr > 1):
-        raise ConfigError(f"--lr (leak rate) must be in (0, 1], got {phi.lr.tolist()}")
+        raise ConfigError(f"--leak-rate must be in (0, 1], got {phi.lr.tolist()}")
     for name, v in (("sr", phi.sr), ("iss", phi.iss)):
         if np.any(v > MAX_SCALE):
-            raise ConfigError(f"--{name} must be <= {MAX_SCALE:g} (the reservoir's float32 sums stay finite), got "
+            raise ConfigError(f"{FLAGS[name]} must be <= {MAX_SCALE:g} (the reservoir's float32 sums stay finite), got "
                               f"{v.tolist()}")
 
 

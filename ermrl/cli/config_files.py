@@ -46,11 +46,16 @@ def load_config_file(path: Path) -> dict:
 
 def apply_config_file(parser: argparse.ArgumentParser, path: Path) -> None:
     """Sets the values of ``path`` as ``parser``'s defaults, after checking each key and type."""
-    actions = {a.dest: a for a in parser._actions
-               if a.option_strings and a.dest not in ("help", "config", "debug", "version")}
+    from ermrl.cli.options import Refused
+
+    kept = [a for a in parser._actions if a.option_strings and not isinstance(a, Refused)
+            and a.dest not in ("help", "config", "debug", "version")]
+    actions = {a.dest: a for a in kept}  # a key names an option by its value's name (lr) or a flag (leak-rate)
+    flags = {o.lstrip("-").replace("-", "_"): a.dest for a in kept for o in a.option_strings}
     values = {}
     for key, value in load_config_file(path).items():
         dest = str(key).lstrip("-").replace("-", "_")
+        dest = dest if dest in actions else flags.get(dest, dest)
         if dest not in actions:
             names = sorted(d.replace("_", "-") for d in actions)
             close = difflib.get_close_matches(dest.replace("_", "-"), names, n=1, cutoff=0.75)

@@ -57,10 +57,12 @@ class Option:
     """Overrides the field's default (e.g. None for 'take the preset's value')."""
     kwargs: dict = dataclasses.field(default_factory=dict)
     """argparse extras: type, nargs, choices, action, metavar."""
+    name: str | None = None
+    """The value's name (argparse's dest, a config file's key) when it is not the flag's."""
 
     @property
     def dest(self) -> str:
-        return self.flag.lstrip("-").replace("-", "_")
+        return self.name or self.flag.lstrip("-").replace("-", "_")
 
     def field_default(self):
         if self.owner is None or self.default is not None:
@@ -129,7 +131,8 @@ def _groups() -> dict[str, list[Option]]:
     from ermrl.reservoir import ReservoirSpec
     from ermrl.training import TrainConfig
 
-    space = [Option(f"--{b}-{hp}", SearchSpace, hp, help=f"{'lower' if b == 'min' else 'upper'} log-uniform bound of {hp}.",
+    space = [Option(f"--{b}-{FLAG_NAMES.get(hp, hp)}", SearchSpace, hp, name=f"{b}_{hp}",
+                    help=f"{'lower' if b == 'min' else 'upper'} log-uniform bound of the {PHI_NAMES[hp]}.",
                     default=getattr(SearchSpace, hp)[0 if b == "min" else 1], kwargs={"type": float})
              for hp in ("sr", "lr", "iss") for b in ("min", "max")]
     return {
@@ -232,12 +235,39 @@ AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connecti
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
 
+PHI_NAMES = {"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}
+FLAG_NAMES = {"lr": "leak-rate"}
+"""Φ's flags spell out the leak rate: in RL, "lr" is a learning rate (PPO's is ``--ppo-lr``)."""
+LEAK_RATE_NOT_LR = ("{flag} is ambiguous: the reservoir's leak rate is {leak}, PPO's learning rate is --ppo-lr "
+                    "(ER-MRL's in a test phase: --ermrl-lr)")
+
+
+class Refused(argparse.Action):
+    """A flag that is refused with ``message`` (a one-line error), whatever values follow it; not in --help."""
+
+    def __init__(self, option_strings, dest, message: str = "", **kwargs):
+        super().__init__(option_strings, dest, nargs="*", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+        self.message = message
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser.error(self.message)
+
+
+def refuse_lr(parser: argparse.ArgumentParser, flag: str, leak: str) -> None:
+    """Refuses ``flag`` (``--lr``, ``--min-lr``, ...) with the one-line error naming both of its meanings."""
+    parser.add_argument(flag, action=Refused, dest=f"refused_{flag.lstrip('-').replace('-', '_')}",
+                        message=LEAK_RATE_NOT_LR.format(flag=flag, leak=leak))
+
+
 def add_options(parser: argparse.ArgumentParser, *groups: str, skip: tuple[str, ...] = ()) -> None:
     table = _groups()
     for group in groups:
         for option in table[group]:
             if option.flag not in skip:
                 option.add_to(parser)
+        if group == "search":
+            refuse_lr(parser, "--min-lr", "--min-leak-rate")
+            refuse_lr(parser, "--max-lr", "--max-leak-rate")
 
 
 def add_config_option(parser: argparse.ArgumentParser) -> None:

@@ -36,9 +36,10 @@ class SearchSpace:
         for name in ("sr", "lr", "iss"):
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
-                raise ConfigError(f"bad {name} bounds [{lo}, {hi}]: need 0 < --min-{name} < --max-{name} (log-uniform)")
+                flag = {"lr": "leak-rate"}.get(name, name)
+                raise ConfigError(f"bad {name} bounds [{lo}, {hi}]: need 0 < --min-{flag} < --max-{flag} (log-uniform)")
         if self.lr[1] > 1:
-            raise ConfigError(f"bad lr bounds [{self.lr[0]}, {self.lr[1]}]: a leak rate is at most 1; use --max-lr 1")
+            raise ConfigError(f"bad lr bounds [{self.lr[0]}, {self.lr[1]}]: a leak rate is at most 1; use --max-leak-rate 1")
         if self.fixed_iss is not None and not (math.isfinite(self.fixed_iss) and self.fixed_iss > 0):
             raise ConfigError(f"--fixed-iss must be positive, got {self.fixed_iss}")
 
