@@ -15,8 +15,9 @@ th{background:#f3f3f3}td.n{text-align:right;font-family:monospace}img{max-width:
 
 
 def fmt(v) -> str:
+    """A cell for reading: floats to 4 significant digits (3e-04 style below 0.001), None as a dash."""
     if isinstance(v, float):
-        return f"{v:.6g}"
+        return f"{v:.4g}"
     if v is None:
         return "—"
     return v if isinstance(v, str) else json.dumps(v, default=str)

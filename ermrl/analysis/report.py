@@ -18,6 +18,7 @@ import optuna
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from optuna.study import StudyDirection
 from optuna.trial import FrozenTrial, TrialState
 
@@ -119,6 +120,7 @@ def fitness_over_trials(study: optuna.Study, path: Path | str) -> Path:
         ax.scatter([t.number for t in bad], [bottom] * len(bad), marker="x", color="red",
                    label=f"failed ({len(bad)})")
     ax.set_xlabel("trial")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("fitness (mean over seeds)")
     ax.set_title(f"{study.user_attrs.get('ermrl', {}).get('env_id', study.study_name)}: fitness over trials")
     ax.grid(alpha=0.3)
@@ -190,6 +192,25 @@ def _test_figure(test_dir: Path, run_dir: Path) -> Path | None:
                            run_dir / f"{test_dir.name}_phase.png")[0]
 
 
+MIN_CI_SEEDS = 5
+"""Below this many seeds a bootstrap CI of P(improvement) is not shown: it would look more certain than it is."""
+
+
+def result_sentence(rows: list[dict]) -> str | None:
+    """One sentence stating a test phase's result: the best ER-MRL model's final score against the PPO baseline on
+    the same observation, or None when the summary has neither."""
+    scored = [r for r in rows if r.get("final_mean") is not None and r.get("final_std") is not None]
+    ours = [r for r in scored if r.get("kind") == "ER-MRL"]
+    ppo = [r for r in scored if r.get("kind") == "PPO"]
+    if not ours or not ppo:
+        return None
+    best = max(ours, key=lambda r: r["final_mean"])
+    base = next((r for r in ppo if "full observation" not in str(r.get("model"))), ppo[0])
+    word = "above" if best["final_mean"] > base["final_mean"] else "below"
+    return (f"{best['model']} ends at {best['final_mean']:.1f} ± {best['final_std']:.1f} (final, mean ± std over "
+            f"{best.get('n_seeds')} seeds), {word} {base['model']}'s {base['final_mean']:.1f} ± {base['final_std']:.1f}.")
+
+
 def test_phase_section(test_dir: Path, run_dir: Path) -> list[str]:
     """HTML of one test phase: its figure, then per model mean ± std, IQM with its 95% CI, diverged seeds, AUC
     and the probability of improvement over each PPO baseline."""
@@ -206,11 +227,18 @@ def test_phase_section(test_dir: Path, run_dir: Path) -> list[str]:
     fig = _test_figure(test_dir, run_dir)
     if fig is not None:
         parts.append(_img(fig, f"test phase on {env_id}"))
+        parts.append("<p>Curves: the mean return of each agent's last 100 episodes at every update; lines are the mean "
+                     "over seeds, shaded bands ± one standard deviation (population, ddof 0). <i>final</i> below is "
+                     "the mean return of the last 10 training episodes, the paper's score, so it can differ from the "
+                     "curve's end.</p>")
+    if (sentence := result_sentence(rows)) is not None:
+        parts.append(f"<p><b>{html.escape(sentence)}</b></p>")
     parts.append(_table(["model", "learning rate", "seeds", "final mean ± std", "final IQM [95% CI]", "diverged", "AUC mean ± std"], [
         [r.get("model", ""), r.get("learning_rate"), r.get("n_seeds"), _pm(r.get("final_mean"), r.get("final_std")),
          format_ci(r.get("final_iqm"), r.get("final_iqm_low"), r.get("final_iqm_high")), r.get("diverged", 0),
          _pm(r.get("auc_mean"), r.get("auc_std"))] for r in rows]))
-    improvements = [[r["model"], b, f"{p:.2f} [{lo:.2f}, {hi:.2f}]"] for r in rows
+    improvements = [[r["model"], b, f"{p:.2f} [{lo:.2f}, {hi:.2f}]" if (r.get("n_seeds") or 0) >= MIN_CI_SEEDS
+                     else f"{p:.2f} (no CI from {r.get('n_seeds')} seeds)"] for r in rows
                     for b, (p, lo, hi) in r.get("improvement", {}).items()]
     if improvements:
         parts.append(_table(["model", "against", "P(improvement) [95% CI]"], improvements))
