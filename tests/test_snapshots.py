@@ -194,11 +194,14 @@ def test_env_groups_replay_to_the_same_future(base_id, discrete):
     a.close(), b.close()
 
 
-def test_ermrl_train_killed_resumes_from_its_snapshot(tmp_path):
+@pytest.mark.parametrize("env", [["--env", "CartPoleNoVel-v1", "--timesteps", "40960"],
+                                 ["--env", "Hopper-v5", "--backend", "mujoco", "--timesteps", "10240"]],
+                         ids=["cartpole-jax", "hopper-mujoco"])
+def test_ermrl_train_killed_resumes_from_its_snapshot(tmp_path, env):
     """A real stop: `ermrl train --out` killed (SIGKILL) once its snapshot exists; the rerun resumes and writes
-    the same fitness as an unbroken run (both of those run in this process)."""
-    args = [*COMMAND, "train", "--env", "CartPoleNoVel-v1", "--seeds", "2", "--timesteps",
-            "40960", "--quiet", "--no-save-agents", "--snapshot-every", "0"]
+    the same fitness as an unbroken run (both of those run in this process). On the MuJoCo backend the envs come
+    back by replaying each one's episode."""
+    args = [*COMMAND, "train", *env, "--seeds", "2", "--quiet", "--no-save-agents", "--snapshot-every", "0"]
     out, snap = tmp_path / "run", tmp_path / "run.snapshot"
     proc = subprocess.Popen(args + ["--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     deadline = time.time() + 300
