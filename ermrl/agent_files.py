@@ -6,12 +6,17 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ermrl.atomic import atomic_path
 from ermrl.errors import ConfigError
 from ermrl.storage import _float_or_none, _json_default, to_dict
+
+if TYPE_CHECKING:
+    from ermrl.agent import AgentConfig
+    from ermrl.envs.spaces import EnvInfo
 
 AGENT_FORMAT = "ermrl-agent"
 AGENT_VERSION = 1
@@ -116,3 +121,104 @@ def find_agents(folder: Path | str) -> list[Path]:
     found = [p for p in folder.rglob("*.npz") if not p.name.startswith(".")
              and (inside or AGENTS_DIR in p.relative_to(folder).parts[:-1])]
     return sorted(found, key=lambda p: [natural(part) for part in p.relative_to(folder).parts])
+
+
+# -- checking an agent file's weights against its own record ---------------------------------------------
+
+
+def _ppo_default(name: str):
+    from ermrl.ppo.config import PPOConfig
+
+    return PPOConfig.__dataclass_fields__[name].default
+
+
+def expected_weights(ppo: dict, env: EnvInfo, config: AgentConfig) -> dict[str, tuple[tuple[int, ...], str]]:
+    """{array in the file (``actor/params/Dense_0/kernel``, ...): (the shape its record implies, what in the record
+    sets it)} of an agent file's policy, from its record: the env's observation and action sizes, the reservoirs
+    (K, units, observed units, skip connection) and the PPO config (hidden widths, LSTM size, gSDE). The context
+    normalization's statistics are left out (see :func:`check_weights`)."""
+    hidden = [int(w) for w in ppo.get("hidden", _ppo_default("hidden"))]
+    action = env.action
+    lstm = ppo.get("model", "ff") == "lstm"
+    if config.reservoirs == 0 or lstm:  # PPO-LSTM: reservoirs 0 (ermrl.training.recurrent.check)
+        context, why = env.obs_dim, f"an observation of {env.obs_dim} values"
+    else:
+        skip = env.obs_dim + action.feature_dim + 1 if config.skip_connection else 0
+        context = config.reservoirs * config.units_seen + skip
+        seen = f"{config.units_seen} seen of {config.spec.units}" if config.observed_units is not None \
+            else config.spec.units
+        why = (f"{config.reservoirs} reservoir{'s' if config.reservoirs > 1 else ''} of {seen} units"
+               + (f" plus a skip connection of {skip} inputs" if skip else ""))
+    shapes: dict[str, tuple[tuple[int, ...], str]] = {}
+    mlp = "params"
+    if lstm:
+        size = int(ppo.get("lstm_hidden_size", _ppo_default("lstm_hidden_size")))
+        cell = f"an LSTM of {size} units"
+        for net in ("actor", "critic"):
+            shapes.update({f"{net}/lstm/kernel_x": ((context, 4 * size), f"{why} and {cell}"),
+                           f"{net}/lstm/kernel_h": ((size, 4 * size), cell),
+                           f"{net}/lstm/bias_ih": ((4 * size,), cell), f"{net}/lstm/bias_hh": ((4 * size,), cell)})
+        context, why, mlp = size, cell, "mlp/params"
+    layers = f"hidden layers {hidden}"
+    for net, out, head in (("actor", action.policy_dim, f"{action.dim} action{'s' if action.dim > 1 else ''}"),
+                           ("critic", 1, "one value")):
+        widths = [context, *hidden, out]
+        for i, (a, b) in enumerate(zip(widths, widths[1:])):
+            into, outof = why if i == 0 else layers, layers if i < len(hidden) else head
+            shapes[f"{net}/{mlp}/Dense_{i}/kernel"] = ((a, b), into if into == outof else f"{into} and {outof}")
+            shapes[f"{net}/{mlp}/Dense_{i}/bias"] = ((b,), outof)
+    if not action.discrete:
+        sde = bool(ppo.get("use_sde", _ppo_default("use_sde")))
+        actions = f"{action.dim} action{'s' if action.dim > 1 else ''}"
+        shapes["log_std"] = ((hidden[-1], action.dim) if sde else (action.dim,),
+                             actions + (f" and gSDE on {layers}" if sde else ""))
+    return shapes
+
+
+def check_weights(path: Path, ppo: dict, env: EnvInfo, config: AgentConfig, phi, actor: dict, critic: dict,
+                  log_std: np.ndarray | None, context_norm: dict | None) -> None:
+    """A one-line ConfigError naming ``path`` and the first array whose shape is not the one the file's record
+    implies (:func:`expected_weights`), or that is missing or not implied at all: a damaged file, or one whose
+    record and weights were written apart. Such a policy would fail inside a matrix product, or (a critic's
+    layer) act on quietly."""
+    got = {**flatten(actor, "actor"), **flatten(critic, "critic")}
+    if log_std is not None:
+        got["log_std"] = log_std
+    try:
+        expected = expected_weights(ppo, env, config)
+    except (TypeError, ValueError, IndexError) as e:  # e.g. hidden widths that are not numbers
+        raise ConfigError(f"{path} is damaged: its record's PPO settings are not what ermrl writes "
+                          f"({type(e).__name__}: {e}); retrain, or load another agent") from None
+    if ppo.get("model", "ff") == "lstm":  # files before bias_ih/bias_hh have one summed "bias"
+        for net in ("actor", "critic"):
+            if f"{net}/lstm/bias" in got and f"{net}/lstm/bias_ih" not in got:
+                shape, why = expected.pop(f"{net}/lstm/bias_ih")
+                expected.pop(f"{net}/lstm/bias_hh")
+                expected[f"{net}/lstm/bias"] = (shape, why)
+    problem = None
+    for name, (shape, why) in expected.items():
+        if name not in got:
+            problem = f"it has no {name} array, which its record ({why}) implies"
+        elif tuple(np.shape(got[name])) != shape:
+            problem = (f"its record says {why}, so {name} should have shape {shape}, but it has "
+                       f"{tuple(np.shape(got[name]))}")
+        if problem:
+            break
+    extra = sorted(set(got) - set(expected))
+    if problem is None and extra:
+        problem = f"it has an array {extra[0]} that its record does not imply"
+    k = config.reservoirs
+    if problem is None and k and isinstance(phi, dict):
+        sizes = {f: len(phi[f]) if isinstance(phi.get(f), list) else 0 for f in ("sr", "lr", "iss")}  # Phi's fields
+        bad = next((f for f, n in sizes.items() if n != k), None)
+        if bad is not None:
+            problem = f"its record says {k} reservoir{'s' if k > 1 else ''} but its Φ has {sizes[bad]} {bad} values"
+    if problem is None and context_norm is not None and ppo.get("normalize"):
+        first = "actor/lstm/kernel_x" if "actor/lstm/kernel_x" in expected else "actor/params/Dense_0/kernel"
+        dim = expected[first][0][0]  # what is normalized: the context (PPO-LSTM: the observation)
+        bad = next((f for f in ("mean", "var") if np.shape(context_norm.get(f, ())) != (dim,)), None)
+        if bad is not None:
+            problem = (f"its normalization's {bad} has shape {np.shape(context_norm.get(bad, ()))}, not ({dim},) as "
+                       "its record implies")
+    if problem is not None:
+        raise ConfigError(f"{path} is damaged: {problem}; retrain, or load another agent")
