@@ -26,14 +26,15 @@ BASELINE_STORE_HELP = ("keep the trained PPO baselines in DIR and reuse them: a 
 
 @functools.cache
 def field_docs(cls) -> dict[str, str]:
-    """{field name: the docstring under it} of a dataclass, read from its source."""
+    """{field name: the first paragraph of the docstring under it} of a dataclass, read from its source: the help
+    text. Paragraphs after a blank line are notes for developers and stay out of ``--help``."""
     tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
     body = tree.body[0].body
     docs = {}
     for node, after in zip(body, body[1:]):
         if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and isinstance(after, ast.Expr) \
                 and isinstance(after.value, ast.Constant) and isinstance(after.value.value, str):
-            docs[node.target.id] = " ".join(after.value.value.split())
+            docs[node.target.id] = " ".join(textwrap.dedent(after.value.value).split("\n\n")[0].split())
     return docs
 
 
@@ -204,7 +205,7 @@ def _groups() -> dict[str, list[Option]]:
                  Option("--recurrent-baseline", TestConfig, "recurrent_baseline", kwargs={"action": "store_true"}),
                  Option("--agents-per-run", help="train each model in groups of at most N agents (a seed at one "
                         "learning rate), each kept in OUT.partial/ when it finishes, so that a stop loses one group "
-                        "at most: for models longer than one sitting (LunarLander at 3M steps). Results are the "
+                        "at most: for models that take hours (LunarLander at 3M steps). Results are the "
                         "same up to rounding. Default: all agents of a model at once (the fastest).",
                         kwargs={"type": int, "metavar": "N"}),
                  Option("--baseline-store", help=BASELINE_STORE_HELP, kwargs={"type": path, "metavar": "DIR"})],

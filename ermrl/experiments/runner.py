@@ -69,7 +69,7 @@ class TestBudget:
     The PPO baselines keep the study's rate (SB3's default, 3e-4)."""
     agents_per_run: int | None = None
     """Train each test model in groups of at most N agents (a seed at one learning rate), each kept when it
-    finishes, so that a stop loses one group at most: for models longer than one sitting (LunarLander at 3M).
+    finishes, so that a stop loses one group at most: for models that take hours (LunarLander at 3M).
     Results are the same up to rounding; None: all agents of a model at once (the fastest)."""
 
     def __post_init__(self):

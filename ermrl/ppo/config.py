@@ -48,7 +48,9 @@ class PPOConfig:
     """Hidden widths of the separate actor and critic MLPs (SB3 MlpPolicy's ``net_arch``, the same for both)."""
     activation: Literal["tanh", "relu"] = dataclasses.field(default="tanh", metadata={OMIT_WHEN_DEFAULT: True})
     """The MLPs' hidden activation (SB3's ``activation_fn``: tanh by default; rl-zoo's recurrent Pendulum settings
-    use ReLU). Left out of a config's record while tanh."""
+    use ReLU).
+
+    Left out of a config's record while tanh."""
     ortho_init: bool = dataclasses.field(default=True, metadata={OMIT_WHEN_DEFAULT: True})
     """SB3's ``ortho_init``: orthogonal weights (gains √2, 0.01 for the policy head, 1 for the value head) and zero
     biases; off, every layer keeps torch's default ``nn.Linear`` init, U(±1/√fan_in) for weights and biases."""
@@ -57,7 +59,9 @@ class PPOConfig:
     normalize: bool = dataclasses.field(default=False, metadata={OMIT_WHEN_DEFAULT: True})
     """Normalize what the policy sees (the context) and the rewards with running statistics, as SB3's
     ``VecNormalize`` (rl-baselines3-zoo's ``normalize: True``; :mod:`ermrl.ppo.normalize`). Off in SB3's
-    PPO and in the paper. Left out of a config's record while off, so that older studies and stores match."""
+    PPO and in the paper.
+
+    Left out of a config's record while off, so that older studies and stores match."""
     use_sde: bool = dataclasses.field(default=False, metadata={OMIT_WHEN_DEFAULT: True})
     """gSDE, generalized State-Dependent Exploration (SB3's ``use_sde``; Box actions only): the policy's noise is
     the actor's last hidden features times an exploration matrix held for ``sde_sample_freq`` steps, its scale
@@ -71,9 +75,11 @@ class PPOConfig:
     then the same MLPs), trained end to end (see :mod:`ermrl.ppo.recurrent`). JAX backend and no reservoir only."""
     lstm_hidden_size: int = 64
     """Units of each LSTM (model "lstm"). sb3-contrib's default is 256; 64 is what rl-baselines3-zoo's tuned
-    RecurrentPPO settings for CartPoleNoVel-v1 and PendulumNoVel-v1 use (hyperparams/ppo_lstm.yml, commit
-    c94924e: ``lstm_hidden_size=64``; their other tuned values, e.g. 8 envs × 32 steps for CartPole, are not
-    taken: the rest stays at SB3's PPO defaults, as for our PPO)."""
+    RecurrentPPO settings for CartPoleNoVel-v1 and PendulumNoVel-v1 use.
+
+    rl-baselines3-zoo's hyperparams/ppo_lstm.yml, commit c94924e: ``lstm_hidden_size=64``; their other tuned
+    values, e.g. 8 envs × 32 steps for CartPole, are not taken: the rest stays at SB3's PPO defaults, as for our
+    PPO."""
     lstm_seq_len: int = 64
     """Steps per training sequence (model "lstm"), the truncated-BPTT length: each epoch cuts the rollout into
     windows of this many consecutive steps from a random offset; a window starts from the LSTM state stored during
