@@ -12,7 +12,6 @@ import pickle
 import signal
 import subprocess
 import time
-import warnings
 
 import optuna
 import pytest
@@ -20,11 +19,11 @@ from optuna.trial import TrialState
 
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.evolve import evolve, make_trainers
-from ermrl.evolution.generations import FULL, Ledger
+from ermrl.evolution.generations import FULL
 from ermrl.evolution.heartbeat import WORKER_ATTR
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
-from ermrl.evolution.workers import Worker, WorkerConfig, worker_seed
+from ermrl.evolution.workers import Worker, WorkerConfig
 from ermrl.evolution.record import encode_study_record
 from ermrl.training import TrainConfig
 
@@ -308,50 +307,6 @@ def test_a_trial_left_running_without_heartbeat_is_failed_after_the_grace_period
     assert (trials[0].state, trials[0].user_attrs["failure"]) == (TrialState.FAIL, "worker lost (no heartbeat for 2 s)")
     assert [t.state for t in trials[1:]] == [TrialState.COMPLETE] * 4
     assert "trial 0 failed: worker lost (no heartbeat for 2 s); it will be redone" in lines
-
-
-def test_a_trial_fits_while_its_generation_has_room():
-    """The race rule: a trial fits when fewer than popsize trials of its generation with smaller numbers are
-    running or complete; undecided while a smaller trial's generation is unknown (it is being asked)."""
-    study = optuna.create_study(direction="maximize")
-    dist = {"x": optuna.distributions.FloatDistribution(0, 1)}
-
-    def add(state, tag=None, label=None):
-        study.add_trial(optuna.trial.create_trial(
-            state=state, params={"x": 0.5}, distributions=dist, value=1.0 if state == TrialState.COMPLETE else None,
-            system_attrs={} if tag is None else {"cma:generation": tag},
-            user_attrs={} if label is None else {"generation": label}))
-        return study.get_trials(deepcopy=False)[-1]
-
-    ledger = Ledger(popsize=2, cma=True)
-    for _ in range(2):
-        add(TrialState.COMPLETE, label=0)  # the random startup generation
-    add(TrialState.COMPLETE, tag=0)
-    add(TrialState.FAIL, tag=0)
-    mine = add(TrialState.RUNNING, tag=0)
-    assert ledger.place(mine, study.get_trials(deepcopy=False)) == 1  # the failed trial's slot
-    late = add(TrialState.RUNNING, tag=0)
-    assert ledger.place(late, study.get_trials(deepcopy=False)) == -1  # lost the race for it
-    assert ledger.next_slots(study.get_trials(deepcopy=False)).free == 0
-    asking = add(TrialState.RUNNING)
-    after = add(TrialState.RUNNING, tag=1)
-    assert ledger.place(after, study.get_trials(deepcopy=False)) is None  # trial 6 might be of generation 2
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        study._storage.set_trial_user_attr(asking._trial_id, "generation", 0)
-    assert ledger.place(after, study.get_trials(deepcopy=False)) == 2
-
-
-def test_worker_seeds():
-    assert worker_seed(7, 0) == 7 and worker_seed(None, 3) is None  # a lone worker draws as before
-    seeds = [worker_seed(7, i) for i in range(8)]
-    assert len(set(seeds)) == 8
-    a, b = (make_sampler("random", 4, s) for s in seeds[:2])
-    study = optuna.create_study()
-    dist = optuna.distributions.FloatDistribution(0, 1)
-    t = study.ask()
-    assert a.sample_independent(study, t._cached_frozen_trial, "x", dist) != \
-        b.sample_independent(study, t._cached_frozen_trial, "x", dist)
 
 
 @pytest.mark.parametrize("args, message", [
