@@ -157,6 +157,22 @@ step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study'
 step_h2() {  # H2: Ant, HalfCheetah, Swimmer with 2 reservoirs, small evolution, test 10 × 1M against PPO
   run locomotion small --only ant-2res halfcheetah-2res swimmer-2res "${TEST10[@]}"
 }
+step_h2_converged() {  # C7 at `--scale converged`: each evolution until CMA-ES has converged (at most 900 trials),
+  # then selection and 10 × 1M against PPO; one study at a time, HalfCheetah first (hours each here; resumes)
+  local s
+  for s in halfcheetah swimmer ant; do
+    run locomotion converged --only "$s-2res" "${TEST10[@]}"
+  done
+}
+step_h3_converged() {  # C10 at `--scale converged`: the three generalization groups
+  run generalization-morphology converged "${TEST10[@]}"
+}
+step_c8_converged() {  # C8 at `--scale converged`: Hopper and Walker2d
+  run locomotion converged --only hopper-2res walker2d-2res "${TEST10[@]}"
+}
+step_c3_converged() {  # C3 at `--scale converged`: LunarLanderNoVel with 1 and 2 reservoirs, tested 10 × 3M
+  run partial-observability converged --only lunarlander-1res lunarlander-2res --test-seeds 10
+}
 step_c8() {  # C8: Hopper and Walker2d, where the paper saw no gain: small evolution, test 10 × 1M against PPO
   run locomotion small --only hopper-2res walker2d-2res "${TEST10[@]}"
 }
@@ -904,7 +920,7 @@ step_other_hps() {  # C17: ReservoirPy's other hyperparameters, one at a time ar
   .venv/bin/python benchmarks/input_saturation.py --out docs/data/other-hps/saturation.md
 }
 
-all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo pendulum_normalize pendulum_rlzoo_sde pendulum_rlzoo_policy pendulum_rlzoo_evolve pendulum_rlzoo_lstm other_hps)
+all_steps=(cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo pendulum_normalize pendulum_rlzoo_sde pendulum_rlzoo_policy pendulum_rlzoo_evolve pendulum_rlzoo_lstm other_hps h2_converged h3_converged c8_converged c3_converged)
 steps=("$@")
 [ ${#steps[@]} -gt 0 ] || steps=("${all_steps[@]}")
 for s in "${steps[@]}"; do
