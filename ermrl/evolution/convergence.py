@@ -32,6 +32,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from ermrl.errors import ConfigError
 from ermrl.evolution.generations import ATTR as GENERATION
+from ermrl.evolution.generations import CMA_GENERATION
 from ermrl.evolution.search_space import SearchSpace
 
 OPTIMIZER_KEY = "cma:optimizer:"
@@ -76,6 +77,9 @@ def centers_and_spreads(trials: list[FrozenTrial], space: SearchSpace) -> dict[i
               for name, d in sorted(space.distributions().items())}
     out: dict[int, dict[str, tuple[float, float]]] = {}
     for t in sorted(trials, key=lambda t: t.number):
+        tag = t.system_attrs.get(CMA_GENERATION)
+        if tag is not None and int(tag) + 1 in out:
+            continue  # this generation's distribution is read already (Optuna stores one on many trials)
         opt = _optimizer(t)
         if opt is None or opt.generation + 1 in out:
             continue
