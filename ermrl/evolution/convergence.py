@@ -49,8 +49,10 @@ class Convergence:
     decades in every searched parameter."""
 
     width: float = 0.01
-    """Decades of each searched parameter (the spread is a standard deviation in log10 units)."""
+    """The widest spread, in decades of each searched parameter (a standard deviation in log10 units), that counts
+    as converged."""
     generations: int = 3
+    """How many generations in a row must each be sampled with every spread below the width."""
 
     def __post_init__(self):
         if not (math.isfinite(self.width) and 0 < self.width <= MAX_WIDTH):
