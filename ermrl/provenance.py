@@ -3,7 +3,7 @@
 A seed reproduces a run bit for bit only with the same versions of these packages, the same CPU instruction set
 and XLA flags (XLA compiles for the host's widest vector unit, and wider vectors sum in another order), and the same
 population size (see ``ermrl.experiments.evaluation``). Measured on Swimmer-v5, PPO, seeds 1000 and 1001, 10 agents,
-mean return of the first two episodes (docs/paper-log.md, 2026-11-25):
+mean return of the first two episodes (CHANGELOG.md, 2026-11-25):
 
 - on an AVX-512 host, JAX 0.10.2, MuJoCo 4.0.0: 3.71577 and 2.15777;
 - the same host limited to AVX2 (``XLA_FLAGS=--xla_cpu_max_isa=AVX2``): 3.78624 and 2.15777, the values of a run
