@@ -4,6 +4,15 @@ curves.csv, damaged config files, an npz that is no agent, and ``studies.db`` wi
 ``one`` and ``plain``)."""
 
 SQLITE = "sqlite:///studies.db"
+STEPS = ("cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarlander lunarlander_1res "
+         "lunarlander_medium lunarlander_lr3e4 probe h2 c8 fft fft_early h3 humanoid c13 c16 hpmap c11 c11_2res peer "
+         "seed_schedule seed_schedule_paper observed_units observed_units_lr3e4 fitness_1m sizes sizes_medium "
+         "sizes_medium_lr3e4 probe_sizes pendulum_paper_500u pendulum_paper_500u_interim pendulum_500u_lr1e4 "
+         "pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 "
+         "pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo "
+         "pendulum_normalize pendulum_rlzoo_sde pendulum_rlzoo_policy pendulum_rlzoo_evolve pendulum_rlzoo_lstm "
+         "recurrent_vs_ermrl other_hps h2_converged h3_converged c8_converged c3_converged").split()
+"""`ermrl reproduce`'s steps, in order."""
 
 CASES = [
     # -- train: numbers, env ids, flags, paths --------------------------------------------------------------
@@ -440,6 +449,17 @@ CASES = [
                                            "for any free port"),
     ("", "ermrl: error: the following arguments are required: COMMAND; see `ermrl --help`"),
     ("trian --units 5", "ermrl: error: argument COMMAND: invalid choice: 'trian' (choose from 'train', 'evolve', "
-                        "'select', 'test', 'report', 'plot', 'baselines', 'experiment', 'analyze', 'convergence', "
-                        "'video', 'dashboard'); see `ermrl --help`"),
+                        "'select', 'test', 'report', 'plot', 'baselines', 'experiment', 'reproduce', 'analyze', "
+                        "'compare', 'test-progress', 'convergence', 'video', 'dashboard'); see `ermrl --help`"),
+    # -- compare, test-progress, reproduce: the files they read, the steps they name ------------------------
+    ("compare a=missing.json", "ermrl compare: error: missing.json is not a file; give a test phase's or an `ermrl "
+                               "train` run's summary.json"),
+    ("compare a=studies.db=x", "ermrl compare: error: studies.db=x is not a file; give a test phase's or an `ermrl "
+                               "train` run's summary.json"),
+    ("compare nolabel.json", "ermrl compare: error: argument LABEL=SUMMARY.json: 'nolabel.json' is not "
+                             "LABEL=SUMMARY.json (e.g. '25 units=.../test/summary.json'); see `ermrl compare --help`"),
+    ("test-progress runs/nope", "ermrl test-progress: error: runs/nope.partial is not a folder; give an unfinished "
+                                "test phase's OUT or OUT.partial folder"),
+    ("reproduce --dry-run C0", "ermrl reproduce: error: unknown step or claim 'C0'; steps: "
+     + " ".join(STEPS) + "; claims: " + " ".join(f"C{i}" for i in range(1, 18))),
 ]

@@ -5,8 +5,8 @@ returns what ``subprocess.run`` would: the exit code that the console script wou
 It is the same code path as the console script (``sys.exit(main())``) minus the interpreter's start-up, and the
 process keeps JAX's compiled programs between runs, so the many tests that train the same small population
 compile it once per test worker instead of once per run (an ``ermrl`` process spends ≈ 4 s importing and 10–15 s
-compiling such a run; see docs/benchmarks.md). ``script(path, *args)`` runs a script (``benchmarks/*.py``) as
-``python PATH ARGS`` would, in this process too.
+compiling such a run; see docs/benchmarks.md). ``script(path, *args)`` runs a script (``benchmarks/*.py``,
+``paper/*.py``) as ``python PATH ARGS`` would, in this process too.
 
 ``ermrl_process(*args)`` starts a real ``python -m ermrl.cli`` process. The tests that need one use it: signals
 and kills, environment variables read at import, pipes and their buffering, several workers at once; and

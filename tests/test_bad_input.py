@@ -150,7 +150,7 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(work, capsys, compiles,
 def test_the_matrix_covers_every_command():
     commands = {c.split()[0] if c else "" for c, _ in CASES}
     assert {"train", "evolve", "select", "test", "report", "plot", "baselines", "experiment", "analyze", "video",
-            "dashboard"} <= commands
+            "dashboard", "compare", "test-progress", "reproduce"} <= commands
     assert len(CASES) >= 50
 
 

@@ -5,7 +5,6 @@ once per session (smoke_study.py)."""
 import dataclasses
 import json
 import shutil
-from pathlib import Path
 
 import numpy as np
 import optuna
@@ -16,7 +15,7 @@ from ermrl.cli import main
 from ermrl.evolution.study import load_study
 from ermrl.experiments import checkpoints, registry, runner
 from ermrl.experiments import evaluation
-from cli_runs import script
+from cli_runs import ermrl
 from smoke_study import BUDGET, EXPERIMENT, RUN, STUDY, cli
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -256,22 +255,29 @@ def test_budgets_override_every_test_phase_and_the_estimate_but_no_study(scale, 
 
 
 def test_the_scores_so_far_of_a_stopped_test_phase(evolved, interrupted, tmp_path):
-    """benchmarks/partial_test_summary.py reads the kept ER-MRL model (2 learning rates × 2 seeds) with the scores
-    that the uninterrupted test phase wrote; a folder that is not a partial one, or holds no model, is refused."""
-    summary = Path(__file__).resolve().parent.parent / "benchmarks" / "partial_test_summary.py"
-    r = script(summary, interrupted / STUDY / "test.partial")
-    assert r.returncode == 0, r.stderr
-    (line,) = [x for x in r.stdout.splitlines() if "(`ermrl`)" in x]
+    """`ermrl test-progress` reads the kept ER-MRL model (2 learning rates × 2 seeds) with the scores that the
+    uninterrupted test phase wrote, given the test phase's folder or its .partial one; a finished test phase, a
+    folder that is not a partial one, or one that holds no model, is a one-line error."""
     rows = json.loads((evolved / STUDY / "test" / "summary.json").read_text())
     per_seed = rows[0]["per_seed"] + rows[1]["per_seed"]
-    assert line.startswith(f"| {rows[0]['model']}, {rows[1]['model']} (`ermrl`) | 4 of 4 | 1000, 1001, 1000, 1001 |")
-    assert line.endswith(" | " + ", ".join(f"{v:.1f}" for v in per_seed) + " |")
-    assert f"{np.mean(per_seed):.1f} ± {np.std(per_seed):.1f}" in line
+    for given in (interrupted / STUDY / "test.partial", interrupted / STUDY / "test"):
+        r = ermrl("test-progress", given)
+        assert r.returncode == 0, r.stderr
+        (line,) = [x for x in r.stdout.splitlines() if "(`ermrl`)" in x]
+        assert line.startswith(f"| {rows[0]['model']}, {rows[1]['model']} (`ermrl`) | 4 of 4 | "
+                               "1000, 1001, 1000, 1001 |")
+        assert line.endswith(" | " + ", ".join(f"{v:.1f}" for v in per_seed) + " |")
+        assert f"{np.mean(per_seed):.1f} ± {np.std(per_seed):.1f}" in line
     (tmp_path / "empty.partial").mkdir()
-    for folder, message in ((tmp_path / "empty.partial", "holds no kept model or snapshot yet (*.npz, *.snapshot)"),
-                            (tmp_path / "missing.partial", "is not a folder; give an unfinished test phase's")):
-        r = script(summary, folder)
-        assert r.returncode == 2 and message in r.stderr, r.stderr
+    finished = evolved / STUDY / "test"
+    for folder, message in (
+            (tmp_path / "empty.partial", f"{tmp_path / 'empty.partial'} holds no kept model or snapshot yet (*.npz, "
+                                         "*.snapshot)"),
+            (tmp_path / "missing.partial", f"{tmp_path / 'missing.partial'} is not a folder; give an unfinished test "
+                                           "phase's OUT or OUT.partial folder"),
+            (finished, f"the test phase in {finished} is finished; its scores are in {finished / 'summary.json'}")):
+        r = ermrl("test-progress", folder)
+        assert (r.returncode, r.stdout, r.stderr) == (2, "", f"ermrl test-progress: error: {message}\n")
 
 
 def test_a_model_stopped_while_it_trains_resumes_from_its_snapshot(evolved, tmp_path, monkeypatch):

@@ -1,4 +1,4 @@
-"""benchmarks/input_saturation.py (C17's likely reason): dense input saturates the reservoir on PendulumNoVel, whose
+"""paper/input_saturation.py (C17's likely reason): dense input saturates the reservoir on PendulumNoVel, whose
 reward (−16..0) and torque (±2) enter unnormalized, and the saturated state loses the deleted velocity. Real
 Pendulum episodes, real reservoirs."""
 
@@ -12,7 +12,7 @@ from ermrl.reservoir import ReservoirSpec
 
 from cli_runs import script
 
-SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "input_saturation.py"
+SCRIPT = Path(__file__).resolve().parent.parent / "paper" / "input_saturation.py"
 
 
 def _run(*args):

@@ -1,4 +1,4 @@
-"""benchmarks/reservoir_count_summary.py (C3): the 2-reservoir test phase against the 1-reservoir `ermrl train` parts."""
+"""paper/reservoir_count_summary.py (C3): the 2-reservoir test phase against the 1-reservoir `ermrl train` parts."""
 
 import json
 from pathlib import Path
@@ -11,7 +11,7 @@ from ermrl.training.results import Episodes, Results
 
 from cli_runs import script
 
-SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "reservoir_count_summary.py"
+SCRIPT = Path(__file__).resolve().parent.parent / "paper" / "reservoir_count_summary.py"
 TWO = [150.0, 200.0, 210.0, -30.0, 180.0, 220.0, 190.0, 100.0, 240.0, 230.0]
 ONE = [100.0, 120.0, 210.0, -50.0, 180.0, 20.0, 90.0, 100.0, 40.0, 230.0]
 
@@ -55,7 +55,7 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
     test, _ = _write(tmp_path / "one-rate", [TWO])
     done = _run(test, tmp_path / "empty")
     assert done.returncode == 2
-    assert "no */summary.json under" in done.stderr and "reproduce_paper.sh lunarlander_1res" in done.stderr
+    assert "no */summary.json under" in done.stderr and "`ermrl reproduce lunarlander_1res`" in done.stderr
 
 
 def _kept_model(folder, job, labels, finals):

@@ -8,7 +8,6 @@ import os
 import signal
 import subprocess
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +20,7 @@ from ermrl.reservoir import ReservoirSpec
 from ermrl.training import Population, TrainConfig, Trainer, snapshots
 from ermrl.training.results import WALL_S
 
-from cli_runs import COMMAND, ermrl, script
+from cli_runs import COMMAND, ermrl
 
 
 TINY = dataclasses.replace(SB3_DEFAULTS, n_steps=128, batch_size=64, n_epochs=1, hidden=(16, 16))
@@ -222,7 +221,7 @@ def test_ermrl_train_killed_resumes_from_its_snapshot(tmp_path, env):
 
 
 def test_the_scores_so_far_of_a_model_in_training(tmp_path):
-    """benchmarks/partial_test_summary.py reads a model's snapshot: the steps done and each agent's mean return
+    """`ermrl test-progress` reads a model's snapshot: the steps done and each agent's mean return
     over its last 10 episodes by then, as the unbroken run's episodes give them."""
     steps = SB3_DEFAULTS.buffer_size
     config = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=10 * steps)
@@ -233,7 +232,7 @@ def test_the_scores_so_far_of_a_model_in_training(tmp_path):
         trainer.run(population, stop_after(5), snapshot=partial / "ermrl.snapshot", snapshot_every_s=0)
     done = 4 * steps
     so_far = [np.mean(e.ret[e.timestep <= done][-10:]) for e in unbroken.episodes]
-    r = script(Path(__file__).resolve().parent.parent / "benchmarks" / "partial_test_summary.py", partial)
+    r = ermrl("test-progress", partial)
     assert r.returncode == 0, r.stderr
     row = r.stdout.splitlines()[2]
     assert row == (f"| `ermrl` (in training) | 2 | 0, 1 | {done:,} of {10 * steps:,} | "

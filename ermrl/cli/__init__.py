@@ -18,7 +18,9 @@ from ermrl.errors import TERMINATED, ConfigError, RunFailed, raise_terminated
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from ermrl.cli import analyze, commands, convergence, dashboard, experiment, video
+    from ermrl.cli import (
+        analyze, commands, compare, convergence, dashboard, experiment, reproduce, test_progress, video,
+    )
 
     parser = OneLineErrorParser(
         prog="ermrl", description="Evolving Reservoirs for Meta Reinforcement Learning (ER-MRL), vectorized in JAX.",
@@ -28,7 +30,10 @@ def build_parser() -> argparse.ArgumentParser:
     formatter = HelpFormatter
     commands.add_parsers(sub, formatter)
     experiment.add_parser(sub, formatter)
+    reproduce.add_parser(sub, formatter)
     analyze.add_parser(sub, formatter)
+    compare.add_parser(sub, formatter)
+    test_progress.add_parser(sub, formatter)
     convergence.add_parser(sub, formatter)
     video.add_parser(sub, formatter)
     dashboard.add_parser(sub, formatter)
@@ -174,11 +179,14 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(argv: list[str] | None) -> int:
-    from ermrl.cli import analyze, commands, convergence, dashboard, experiment, video
+    from ermrl.cli import (
+        analyze, commands, compare, convergence, dashboard, experiment, reproduce, test_progress, video,
+    )
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    handlers = {**commands.COMMANDS, "experiment": experiment.run_command, "analyze": analyze.run_command,
-                "convergence": convergence.cmd_convergence,
+    handlers = {**commands.COMMANDS, "experiment": experiment.run_command, "reproduce": reproduce.cmd_reproduce,
+                "analyze": analyze.run_command, "compare": compare.cmd_compare,
+                "test-progress": test_progress.cmd_test_progress, "convergence": convergence.cmd_convergence,
                 "video": video.run_command, "dashboard": dashboard.run_command}
     words = [a for a in argv if not a.startswith("-")]
     command = f"ermrl {words[0]}" if words and words[0] in handlers else "ermrl"

@@ -1,6 +1,6 @@
 """What the commands share: the study options (--study, --storage, --out), where a study's folder and storage
-are, progress bars for commands that train several models in turn, and the note under a time estimate when
-the machine looks busy."""
+are, progress bars for commands that train several models in turn, the note under a time estimate when the
+machine looks busy, and the one-line message of a file that cannot be read."""
 
 from __future__ import annotations
 
@@ -134,3 +134,10 @@ def own_snapshot(path: Path) -> Path:
         raise ConfigError(f"{path} is in the way: the run keeps its snapshot there, and it is not one (or is "
                           "damaged); move it away or give another --out")
     return path
+
+
+def one_line(e: OSError | ValueError) -> str:
+    """An OSError or ValueError of a file read as one line: "No such file or directory: PATH" for a missing one."""
+    if isinstance(e, OSError) and e.strerror and e.filename:
+        return f"{e.strerror}: {e.filename}"
+    return str(e).strip().splitlines()[0]

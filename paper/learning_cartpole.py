@@ -1,7 +1,7 @@
 """Learning on masked CartPole at full size: ER-MRL (sr 0.95, lr 0.5) against plain PPO on the same masked
 observation and PPO with full observations; 3 seeds × 300k steps each, SB3-default PPO (lr 3e-4).
 
-    python benchmarks/learning_cartpole.py --out docs/figures/cartpole_novel
+    python paper/learning_cartpole.py --out docs/figures/cartpole_novel
 
 Prints a Markdown table (final fitness, mean ± std over seeds) and writes the figure as PNG.
 """

@@ -13,7 +13,7 @@ draw it reports three numbers:
 - the velocity R² of the linear probe, that is, how much of the deleted velocities the state still holds.
 
 Usage:
-    .venv/bin/python benchmarks/input_saturation.py [--env PendulumNoVel-v1 CartPoleNoVel-v1]
+    .venv/bin/python paper/input_saturation.py [--env PendulumNoVel-v1 CartPoleNoVel-v1]
         [--input-connectivity 0.1 0.5 1] [--draws 3] [--episodes 100] [--out docs/data/other-hps/saturation.md]
 """
 

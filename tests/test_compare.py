@@ -1,24 +1,25 @@
-"""benchmarks/variant_summary.py (C14, C15): reservoir variants' test phases, compared seed by seed."""
+"""`ermrl compare` (C14-C17 and the lr diagnostics): reservoir variants' test phases and train runs, compared seed
+by seed."""
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 
 from ermrl import storage
+from ermrl.analysis import variants
 from ermrl.analysis.statistics import format_ci, paired_difference, probability_of_improvement, summarize
 
-from cli_runs import ermrl, script
+from cli_runs import ermrl
 
-SCRIPT = Path(__file__).resolve().parent.parent / "benchmarks" / "variant_summary.py"
+DATA = Path(__file__).resolve().parent.parent / "docs" / "data"
 SMALL = [500.0, 480.0, 210.0, 30.0, 500.0, 420.0, 190.0, 100.0, 440.0, 230.0]
 LARGE = [100.0, None, 210.0, 50.0, 180.0, 20.0, 90.0, 100.0, 40.0, 230.0]  # seed 1001 diverged
 PPO = [40.0, 35.0, 52.0, 28.0, 44.0, 39.0, 31.0, 47.0, 36.0, 41.0]
 
 
 def _run(*args):
-    return script(SCRIPT, *args)
+    return ermrl("compare", *args)
 
 
 def _summary(folder: Path, *ermrl_rows) -> Path:
@@ -72,10 +73,7 @@ def test_figure_draws_each_variants_curve_and_the_ppo_curves(tmp_path):
                 "--title", "two learning rates")  # the same curves under another title: another image
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "titled.png").read_bytes() != (tmp_path / "fig.png").read_bytes()
-    spec = importlib.util.spec_from_file_location("variant_summary", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    drawn = module.curves({"100 units": [small], "1000 units": [large]})
+    drawn = variants.curves({"100 units": [small], "1000 units": [large]})
     assert list(drawn) == ["ER-MRL, 100 units", "ER-MRL, 1000 units", "PPO (same observation)"]
     np.testing.assert_array_equal(drawn["ER-MRL, 100 units"][0], [2048, 4096, 6144])
     np.testing.assert_array_equal(drawn["ER-MRL, 1000 units"][1], rising / 2)
@@ -116,8 +114,19 @@ def test_an_ermrl_train_run_is_a_variant_too(tmp_path):
     (bad := tmp_path / "bad.json").write_text(json.dumps({"seeds": [1000]}))
     done = _run(f"a={bad}")
     assert done.returncode == 2
-    assert done.stderr.strip().splitlines()[-1].endswith(
-        f"{bad} is neither a test phase's nor an `ermrl train` run's summary.json")
+    assert done.stderr == f"ermrl compare: error: {bad} is neither a test phase's nor an `ermrl train` run's " \
+                          "summary.json\n"
+
+
+def _refused(cases, figure: Path) -> None:
+    """Each (args, message) of ``cases`` is refused: exit 2, one line naming ``message``, no output, no figure."""
+    for args, message in cases:
+        done = _run(*args)
+        assert done.returncode == 2, (args, done.stderr)
+        assert done.stderr.count("\n") == 1 and done.stderr.startswith("ermrl compare: error: "), (args, done.stderr)
+        assert message in done.stderr, (args, done.stderr)
+        assert done.stdout == ""
+    assert not figure.exists()
 
 
 def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
@@ -128,20 +137,15 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
         ((f"a={small}", "--compare", "a", "b"), "--compare names 'b', which is none of the variants or PPO rows (a, PPO (same observation))"),
         ((f"a={small}", f"a={small}"), "two variants are named 'a'; name each once"),
         ((str(small),), f"{str(small)!r} is not LABEL=SUMMARY.json"),
-        ((f"a={tmp_path / 'missing.json'}",), "No such file or directory"),
+        ((f"a={tmp_path / 'missing.json'}",), f"{tmp_path / 'missing.json'} is not a file; give a test phase's or "
+                                              "an `ermrl train` run's summary.json"),
         ((f"a={small}", "--figure", tmp_path / "f.png"), "No such file or directory"),  # no curves.csv beside it
     ]
     other = _summary(tmp_path / "other", SMALL)
     _curves(other.parent, np.ones((2, 3)), models=("ER-MRL lr 0.0003", "PPO (same observation)"))
     cases.append(((f"a={other}", "--figure", tmp_path / "f.png"),
                   f"{other.parent / 'curves.csv'} has no curve of 'ER-MRL lr 0.0001'; give the curves.csv"))
-    for args, message in cases:
-        done = _run(*args)
-        assert done.returncode == 2, (args, done.stderr)
-        last = done.stderr.strip().splitlines()[-1]  # after argparse's usage lines: the one-line error
-        assert last.startswith("variant_summary.py: error: ") and message in last, (args, done.stderr)
-        assert done.stdout == ""
-    assert not (tmp_path / "f.png").exists()
+    _refused(cases, tmp_path / "f.png")
 
 
 def _train_run(folder: Path, scores: dict[int, float], curve: np.ndarray, steps=(2048, 4096, 6144)) -> Path:
@@ -185,10 +189,25 @@ def test_ermrl_train_runs_on_other_seeds_join_into_one_variant(tmp_path):
          "the same --timesteps"),
         ((f"a={first},",), f"'a={first},' is not LABEL=SUMMARY.json"),
     ]
-    for args, message in cases:
-        done = _run(*args)
-        assert done.returncode == 2, (args, done.stderr)
-        last = done.stderr.strip().splitlines()[-1]
-        assert last.startswith("variant_summary.py: error: ") and message in last, (args, done.stderr)
-        assert done.stdout == ""
-    assert not (tmp_path / "f.png").exists()
+    _refused(cases, tmp_path / "f.png")
+
+
+def test_the_committed_lr_diagnostic_is_what_compare_prints(tmp_path):
+    """The committed table of step observed_units_lr3e4 (docs/data/observed-units-small/1000-of-1000/), printed again
+    from the committed summaries and curves: the same bytes; its figure too, as a PNG."""
+    d = DATA / "observed-units-small" / "1000-of-1000"
+    done = _run(f"1000 of 1000, lr 1e-4={d / 'test' / 'summary.json'}",
+                f"1000 of 1000, lr 3e-4={d / 'ermrl-lr3e-4' / 'summary.json'}",
+                "--compare", "1000 of 1000, lr 3e-4", "1000 of 1000, lr 1e-4",
+                "--title", "evolved Φ* at PPO lr 1e-4 and 3e-4, the same seeds", "--figure", tmp_path / "lr.png")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == (d / "lr3e-4-vs-1e-4.md").read_text(encoding="utf-8")
+    assert (tmp_path / "lr.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_figure_path_that_cannot_be_written_is_refused_before_any_work(tmp_path):
+    summary = _summary(tmp_path / "small", SMALL)
+    (tmp_path / "file").write_text("")
+    done = _run(f"a={summary}", "--figure", tmp_path / "file" / "fig.png")
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.startswith("ermrl compare: error: --figure ") and done.stderr.count("\n") == 1

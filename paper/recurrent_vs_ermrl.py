@@ -10,9 +10,9 @@ Every (env, model) run is saved as JSON under --data (final fitness per seed, cu
 iteration, compile_s, train_s, the machine's load); a rerun skips what is saved, so the script resumes. The
 figures (return against steps and against wall time, mean ± std over seeds) go to --figures:
 
-    python benchmarks/recurrent_vs_ermrl.py --timesteps 300000                 # train what is missing, then plot
-    python benchmarks/recurrent_vs_ermrl.py --timesteps 300000 --plot-only
-    python benchmarks/recurrent_vs_ermrl.py --models lstm --envs PendulumNoVel-v1 --timesteps 1000000
+    python paper/recurrent_vs_ermrl.py --timesteps 300000                 # train what is missing, then plot
+    python paper/recurrent_vs_ermrl.py --timesteps 300000 --plot-only
+    python paper/recurrent_vs_ermrl.py --models lstm --envs PendulumNoVel-v1 --timesteps 1000000
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ reference venv (it needs ReservoirPy and ermrl). Prints each agent's fitness (me
 episodes) and can write a JSON.
 
 Example:
-    .venv-ref/bin/python benchmarks/peer_reservoir_draws.py --agents 10 --timesteps 300000 \\
+    .venv-ref/bin/python paper/peer_reservoir_draws.py --agents 10 --timesteps 300000 \\
         --sr 0.508 --leak-rate 0.0568 --bias bernoulli --json out.json
 """
 
@@ -34,7 +34,7 @@ def reservoirpy_unit_weights(env_id: str, seed: int, sr: float, lr: float, iss: 
     W (1, N, N) / sr, Win (1, N, D) / iss, bias (1, N); float32."""
     from ermrl.reservoir import ReservoirWeights
 
-    sys.path.insert(0, str(Path(__file__).parent))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # reference_pipeline.py
     from reference_pipeline import make_env
 
     env = make_env(env_id, seed, sr, lr, iss, bias=bias)

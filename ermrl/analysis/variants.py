@@ -1,37 +1,23 @@
-"""C14-C17: reservoir variants (sizes, observed units, reservoir counts, other HPs) of one env, on the same seeds.
+"""Reservoir variants of one env (sizes, observed units, reservoir counts, other HPs, learning rates) compared on the
+same seeds: what ``ermrl compare`` prints and draws.
 
-Reads the ``summary.json`` of each variant's test phase (or of an ``ermrl train`` run, for C17's sweep of
-ReservoirPy's other hyperparameters), as ``benchmarks/reproduce_paper.sh sizes observed_units``
-writes them (``runs/experiments/EXPERIMENT-small/STUDY/test/``, or ``test-ENV/`` for a study tested on
-another env, as C16's; collected under ``docs/data/``). Every test phase
-trains its ER-MRL agents and its PPO baselines on the seeds 1000, 1001, ..., so a variant's seed k and another's
-share the env noise and the policy's initialization, not the reservoirs.
+A variant is the ``summary.json`` of a test phase (``runs/experiments/EXPERIMENT-SCALE/STUDY/test/``, or
+``test-ENV/`` for a study tested on another env; collected under ``docs/data/``) or of an ``ermrl train`` run. Every
+test phase trains its ER-MRL agents and its PPO baselines on the seeds 1000, 1001, ..., so a variant's seed k and
+another's share the env noise and the policy's initialization, not the reservoirs. Several ``ermrl train`` runs of
+the same settings on other seeds may be joined into one variant (their seeds pooled); test phases cannot be joined
+(their summaries number their seeds from 1000).
 
-Prints a Markdown table: each variant's ER-MRL row (n, mean ± std, IQM [95% CI], the area under the curve over
-the first 300k steps), then the PPO rows of the first test phase; then, for each ``--compare A B``,
-P(A > B) with its 95% CI (rliable) and the paired difference A − B over the shared seeds (SciPy: BCa CI,
-Wilcoxon p); A or B may also name a PPO row of the first test phase (e.g. "PPO (full observation)"). With
-``--figure PATH``, it also draws the variants' ER-MRL learning curves (mean ± std over the seeds) and the first
-test phase's PPO curves on one plot, from the ``curves.csv`` beside each ``summary.json``.
-
-A variant may join ``ermrl train`` runs of the same settings on other seeds, ``LABEL=RUN1.json,RUN2.json`` (e.g. the
-test seeds 1000-1009 and ten more, 1010-1019): their seeds are pooled in the table, the comparisons and the figure.
-Test phases cannot be joined (their summaries number their seeds from 1000).
-
-Example (C15):
-    .venv/bin/python benchmarks/variant_summary.py \\
-        "100 of 100=docs/data/observed-units-small/100-of-100/test/summary.json" \\
-        "1000 of 1000=docs/data/observed-units-small/1000-of-1000/test/summary.json" \\
-        "100 of 1000=docs/data/observed-units-small/100-of-1000/test/summary.json" \\
-        --compare "100 of 100" "1000 of 1000" --compare "100 of 1000" "1000 of 1000" \\
-        --figure docs/data/observed-units-small/curves.png
+:func:`table` is the Markdown table: each variant's ER-MRL row (n, mean ± std, IQM [95% CI], the area under the
+curve over the first 300k steps), then the PPO rows of the first test phase; then, for each comparison (A, B),
+P(A > B) with its 95% CI (rliable) and the paired difference A − B over the shared seeds (SciPy: BCa CI, Wilcoxon p).
+:func:`curves` gives the learning curves to draw, from the ``curves.csv`` beside each ``summary.json``. Errors are
+ValueError (a file of the wrong kind, an unknown label) or OSError (a missing file), each one line.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 from pathlib import Path
 
 
@@ -193,44 +179,15 @@ def curves(variants: dict[str, list[Path]]) -> dict[str, tuple]:
     return {**out, **(ppo or {})}
 
 
-def _variant(text: str) -> tuple[str, list[Path]]:
+def parse_variant(text: str) -> tuple[str, list[Path]]:
+    """``LABEL=SUMMARY.json`` or ``LABEL=RUN1.json,RUN2.json`` as (label, [paths]); ValueError when it is not."""
     label, sep, paths = text.partition("=")
     if not sep or not label or "" in paths.split(","):
-        raise argparse.ArgumentTypeError(f"{text!r} is not LABEL=SUMMARY.json (e.g. '25 units=.../test/summary.json')")
+        raise ValueError(f"{text!r} is not LABEL=SUMMARY.json (e.g. '25 units=.../test/summary.json')")
     return label, [Path(path) for path in paths.split(",")]
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("variants", nargs="+", type=_variant, metavar="LABEL=SUMMARY.json",
-                        help="a variant's name and its test phase's summary.json, or `ermrl train` runs' "
-                             "summaries joined by ',' (their seeds pooled)")
-    parser.add_argument("--compare", nargs=2, action="append", default=[], metavar=("A", "B"),
-                        help="print P(A > B) and the paired difference A − B (repeatable); A or B: a variant's label "
-                             "or a PPO row's model name, e.g. 'PPO (full observation)'")
-    parser.add_argument("--figure", type=Path, metavar="PATH.png",
-                        help="also draw every variant's ER-MRL learning curve and the PPO curves there")
-    parser.add_argument("--title", default="reservoir variants, the same seeds",
-                        help="the figure's title, after the env id (e.g. 'Φ* at two learning rates')")
-    args = parser.parse_args(argv)
-    labels = [label for label, _ in args.variants]
-    if len(set(labels)) != len(labels):
-        parser.error(f"two variants are named {next(x for x in labels if labels.count(x) > 1)!r}; name each once")
-    try:
-        variants = dict(args.variants)
-        text = table(variants, [tuple(c) for c in args.compare])
-        drawn = curves(variants) if args.figure is not None else None  # read before anything is written
-        sys.stdout.write(text)
-        if drawn is not None:
-            from ermrl.analysis.plots import learning_curves
-
-            first = json.loads(args.variants[0][1][0].read_text())
-            env_id = (first if isinstance(first, dict) else first[0]).get("env_id", "")
-            learning_curves(drawn, f"{env_id}: {args.title}", args.figure.with_suffix(".png"))
-    except (OSError, ValueError) as e:
-        parser.error(str(e))  # exit code 2
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+def env_id(path: Path) -> str:
+    """The env id a summary.json names (a test phase's first row's, or an ``ermrl train`` run's); "" if none."""
+    first = json.loads(path.read_text())
+    return (first if isinstance(first, dict) else first[0]).get("env_id", "")

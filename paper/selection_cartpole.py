@@ -2,7 +2,7 @@
 trial (the paper's Φ*) and the winner of `ermrl select` (the top K re-evaluated on fresh seeds) are both trained
 on the same new test seeds, and their final fitness compared.
 
-    python benchmarks/selection_cartpole.py --studies 3 --trials 30 --timesteps 100000 \
+    python paper/selection_cartpole.py --studies 3 --trials 30 --timesteps 100000 \
         --storage docs/data/selection_cartpole.log --out docs/data/selection_cartpole.json
 
 The studies live in one Optuna journal file (``--storage``), so a rerun resumes them and reuses their selections;
@@ -90,7 +90,7 @@ def main() -> None:
     chosen = np.array([v for r in rows for v in r["test_selected"]], dtype=object)
     summary = {"raw_best": statistics.summarize(raw).as_dict(), "selected": statistics.summarize(chosen).as_dict(),
                "p_selected_beats_raw_best": statistics.probability_of_improvement(chosen, raw)}
-    out = {"command": "python benchmarks/selection_cartpole.py " + " ".join(
+    out = {"command": "python paper/selection_cartpole.py " + " ".join(
         f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items()), "wall_seconds": wall, "studies": rows,
         "summary": summary}
     storage.write_json(a.out, out)

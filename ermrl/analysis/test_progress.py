@@ -6,18 +6,12 @@ only at the end. Until then each finished model, or group of agents with ``--age
 groups joined: the agents kept out of the model's, their seeds, and the same final-score statistics as the test
 summary (mean ± std over seeds, population std; IQM with its 95% CI) and per-seed scores. The model in training,
 if any, gets a row from its snapshot (``OUT.partial/NAME.snapshot``, :mod:`ermrl.training.snapshots`): how far it
-is, and each agent's mean return over its last 10 episodes so far.
-
-Example:
-    .venv/bin/python benchmarks/partial_test_summary.py \\
-        runs/experiments/partial-observability-small/lunarlander-2res/test.partial
+is, and each agent's mean return over its last 10 episodes so far. ``ermrl test-progress OUT`` prints it.
 """
 
 from __future__ import annotations
 
-import argparse
 import re
-import sys
 from pathlib import Path
 
 GROUP = re.compile(r"^(?P<job>.+)\.agents-(?P<lo>\d+)-(?P<hi>\d+)$")
@@ -65,13 +59,26 @@ def in_training(partial: Path) -> list[str]:
     return rows
 
 
+def partial_folder(path: Path) -> Path:
+    """The ``OUT.partial`` folder of a test phase given as ``OUT`` or ``OUT.partial``; ValueError when there is none
+    (and says so when the test phase is finished)."""
+    partial = path if path.name.endswith(".partial") else path.with_name(path.name + ".partial")
+    if partial.is_dir():
+        return partial
+    out = partial.with_name(partial.name[: -len(".partial")])
+    if (out / "summary.json").is_file():
+        raise ValueError(f"the test phase in {out} is finished; its scores are in {out / 'summary.json'}")
+    raise ValueError(f"{partial} is not a folder; give an unfinished test phase's OUT or OUT.partial folder")
+
+
 def table(partial: Path) -> str:
+    """The Markdown table of ``partial`` (an ``OUT.partial`` folder): a row per kept model, then a row per model
+    in training; ValueError when it holds neither."""
+    from ermrl import storage
     from ermrl.analysis.statistics import format_ci
+    from ermrl.experiments.checkpoints import SETTINGS
     from ermrl.experiments.evaluation import summarize
     from ermrl.training.results import Results
-
-    from ermrl import storage
-    from ermrl.experiments.checkpoints import SETTINGS
 
     models = kept_models(partial)
     training = in_training(partial)
@@ -92,17 +99,3 @@ def table(partial: Path) -> str:
                      f"{format_ci(row['final_iqm'], row['final_iqm_low'], row['final_iqm_high'])} | {per_seed} |")
     return "\n".join(lines + training) + "\n"
 
-
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("partial", type=Path, help="an unfinished test phase's OUT.partial folder")
-    args = parser.parse_args(argv)
-    try:
-        sys.stdout.write(table(args.partial))
-    except (OSError, ValueError) as e:
-        parser.error(str(e))  # exit code 2
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,6 +1,6 @@
 """C3, one reservoir against two on LunarLanderNoVel: the two evolved Φ* trained on the same 10 test seeds.
 
-Reads what ``benchmarks/reproduce_paper.sh lunarlander lunarlander_1res`` writes:
+Reads what ``ermrl reproduce lunarlander lunarlander_1res`` writes:
 
 - the 2-reservoir Φ*'s agents: the ER-MRL row of the test phase's ``summary.json``
   (``docs/data/partial-observability-small/lunarlander-2res/test/``), or, while its PPO baselines still train,
@@ -15,7 +15,7 @@ difference 2 − 1 over the shared seeds (SciPy: BCa CI, Wilcoxon p). A pair sha
 initialization), not its reservoirs.
 
 Example:
-    .venv/bin/python benchmarks/reservoir_count_summary.py \\
+    .venv/bin/python paper/reservoir_count_summary.py \\
         docs/data/partial-observability-small/lunarlander-2res/test/summary.json docs/data/c3-lunarlander
 """
 
@@ -52,7 +52,7 @@ def one_reservoir(folder: Path) -> dict[int, float]:
         d = json.loads(path.read_text())
         scores.update({int(s): float(f) for s, f in zip(d["seeds"], d["fitness"], strict=True)})
     if not scores:
-        raise ValueError(f"no */summary.json under {folder}; run `benchmarks/reproduce_paper.sh lunarlander_1res`")
+        raise ValueError(f"no */summary.json under {folder}; run `ermrl reproduce lunarlander_1res`")
     return scores
 
 

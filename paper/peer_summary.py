@@ -1,11 +1,11 @@
 """Peer agreement, paired: the two training stacks (SB3 + ReservoirPy's pipeline, ermrl) on the *same* reservoirs.
 
-Reads the JSON files that ``benchmarks/reproduce_paper.sh peer`` writes under
+Reads the JSON files that ``ermrl reproduce peer`` writes under
 ``docs/data/partial-observability-paper/peer/`` and pairs them seed by seed:
 
 - ReservoirPy's draws: ``reference-bernoulli*.json`` (SB3 on ReservoirPy's reservoir for each seed) against
   ``ermrl-ppo-draws-*.json``'s ``reservoirpy`` entry (ermrl's PPO on those very reservoirs,
-  ``benchmarks/peer_reservoir_draws.py``);
+  ``paper/peer_reservoir_draws.py``);
 - ermrl's draws: ``reference-bernoulli-ermrl-weights-*.json`` (SB3 on ermrl's reservoir for each seed,
   ``reference_pipeline.py --weights ermrl``) against ``ermrl-bernoulli-fresh/summary.json`` (``ermrl train``).
 
@@ -15,7 +15,7 @@ std) and IQM [95% CI] (``ermrl.analysis.statistics.summarize``), the mean paired
 95% bootstrap CI (SciPy, BCa, 10,000 resamples) and the Wilcoxon signed-rank p-value (SciPy).
 
 Example:
-    .venv/bin/python benchmarks/peer_summary.py docs/data/partial-observability-paper/peer
+    .venv/bin/python paper/peer_summary.py docs/data/partial-observability-paper/peer
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ def main(argv=None) -> int:
                 "docs/data/partial-observability-paper/peer")
     pairs = load_pairs(a.folder)
     if not pairs:
-        p.error(f"no paired results in {a.folder}: run `benchmarks/reproduce_paper.sh peer` first")
+        p.error(f"no paired results in {a.folder}: run `ermrl reproduce peer` first")
     print("| reservoirs | seeds | n | SB3 + ReservoirPy pipeline | ermrl | SB3 − ermrl, paired [95% CI] | Wilcoxon p |")
     print("|---|---|---|---|---|---|---|")
     pooled_sb3, pooled_erm = [], []
