@@ -89,12 +89,12 @@ pendulum_medium_lr1e4() {  # pendulum_medium_lr1e4 STUDY UNITS: a `medium` Pendu
   # on the test seeds (1000-1009 × 1M) at 1e-4 into docs/data/STUDY/ermrl/ (skipped once there)
   local s=$1 units=$2 d=docs/data/$1 phi
   "$E" evolve --env PendulumNoVel-v1 --units "$units" --reservoirs 1 --fixed-iss 1.0 --trials 60 --seeds 3 \
-      --timesteps 300000 --ppo-lr 1e-4 --study "$s" --storage "$d/studies.log" --out "runs/$s" --quiet
+      --timesteps 300000 --learning-rate 1e-4 --study "$s" --storage "$d/studies.log" --out "runs/$s" --quiet
   "$E" select --study "$s" --storage "$d/studies.log" --out "runs/$s" --top 5 --seeds 5 --quiet
   phi=$(phi_flags "$d/studies.log" "$s")
   # shellcheck disable=SC2086
   [ -f "$d/ermrl/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units "$units" $phi --seeds 10 \
-      --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet --out "$d/ermrl"
+      --first-seed 1000 --timesteps 1000000 --learning-rate 1e-4 --no-save-agents --quiet --out "$d/ermrl"
 }
 step_pendulum_lr1e4() {  # C6/H1: the `medium` PendulumNoVel study evolved at lr 1e-4, the paper's rate for the
   # masked tasks (App., PPO hyperparameters; the reference's evolution script kept 3e-4, as `pendulum_medium` does),
@@ -108,7 +108,7 @@ step_lunarlander() {  # H1: LunarLanderNoVel with 2 reservoirs, small evolution,
   # a model (10 agents × 3M host steps, ≈ 2.5 h here) is longer than one sitting: it resumes from its snapshot
   # (OUT.partial/JOB.snapshot, every 5 min, stashed under docs/data/); all 10 agents at once step 1.7× faster
   # than in groups of 5, and in the main process 1.3× faster than over 2 worker pipes (docs/benchmarks.md)
-  run partial-observability small --only lunarlander-2res --test-seeds 10 --test-timesteps 3000000 --test-lrs 1e-4 \
+  run partial-observability small --only lunarlander-2res --test-seeds 10 --test-timesteps 3000000 --test-learning-rates 1e-4 \
       --env-workers 0
 }
 step_lunarlander_medium() {  # H1, the LunarLander target's next attempt: the paper's per-trial budget (60 trials
@@ -116,7 +116,7 @@ step_lunarlander_medium() {  # H1, the LunarLander target's next attempt: the pa
   # the test phase 10 × 3M at lr 1e-4 (PPO's baselines are the `lunarlander` step's, from the store). ≈ 70 min of
   # evolution (24 agents at ≈ 12.9k agent-steps/s) and ≈ 1 h of test here (run 2026-11-25: 77 + 16 + 62 min): it resumes across sittings
   # (whole CMA-ES generations; the test model from its snapshot)
-  run partial-observability medium --only lunarlander-2res --test-lrs 1e-4 --env-workers 0
+  run partial-observability medium --only lunarlander-2res --test-learning-rates 1e-4 --env-workers 0
 }
 step_lunarlander_lr3e4() {  # H1, diagnostic of the LunarLander target's miss: the `medium` Φ* was evolved and selected
   # at lr 3e-4 but tested at 1e-4 (the paper's test lr); here it trains on the same test seeds (1000-1009, 3M) at
@@ -126,7 +126,7 @@ step_lunarlander_lr3e4() {  # H1, diagnostic of the LunarLander target's miss: t
   phi=$(phi_flags docs/data/partial-observability-medium/studies.log partial-observability-medium-lunarlander-2res)
   # shellcheck disable=SC2086
   [ -f "$d/ermrl-lr3e-4/summary.json" ] || "$E" train --env LunarLanderNoVel-v3 $phi --reservoirs 2 --seeds 10 \
-      --first-seed 1000 --timesteps 3000000 --ppo-lr 3e-4 --env-workers 0 --no-save-agents --quiet --out "$d/ermrl-lr3e-4"
+      --first-seed 1000 --timesteps 3000000 --learning-rate 3e-4 --env-workers 0 --no-save-agents --quiet --out "$d/ermrl-lr3e-4"
   .venv/bin/python benchmarks/variant_summary.py "medium Φ*, lr 1e-4=$d/test/summary.json" \
       "medium Φ*, lr 3e-4=$d/ermrl-lr3e-4/summary.json" \
       "small Φ*, lr 1e-4=docs/data/partial-observability-small/lunarlander-2res/test/summary.json" \
@@ -146,7 +146,7 @@ step_lunarlander_1res() {  # C3, 1 reservoir against 2: the `lunarlander` study'
   phi=$(phi_flags "$d/studies.log" lunarlander-1res)
   # shellcheck disable=SC2086
   [ -f "$d/ermrl-1res/summary.json" ] || "$E" train --env LunarLanderNoVel-v3 $phi --seeds 10 --first-seed 1000 \
-      --timesteps 3000000 --ppo-lr 1e-4 --env-workers 0 --no-save-agents --quiet --out "$d/ermrl-1res"
+      --timesteps 3000000 --learning-rate 1e-4 --env-workers 0 --no-save-agents --quiet --out "$d/ermrl-1res"
   local two=docs/data/partial-observability-small/lunarlander-2res/test/summary.json
   local kept=partial-observability-small/lunarlander-2res/test.partial/ermrl.npz
   [ -f "$two" ] || two=runs/experiments/$kept  # its ER-MRL model, kept while the PPO baselines train,
@@ -282,7 +282,7 @@ step_observed_units_lr3e4() {  # C15 / the CartPole target, a diagnostic: the 10
   phi=$(phi_flags "$d/studies.log" observed-units-small-1000-of-1000)
   # shellcheck disable=SC2086
   [ -f "$d/1000-of-1000/ermrl-lr3e-4/summary.json" ] || "$E" train --env CartPoleNoVel-v1 $phi --units 1000 \
-      --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 3e-4 --no-save-agents --quiet \
+      --seeds 10 --first-seed 1000 --timesteps 1000000 --learning-rate 3e-4 --no-save-agents --quiet \
       --out "$d/1000-of-1000/ermrl-lr3e-4"
   .venv/bin/python benchmarks/variant_summary.py "1000 of 1000, lr 1e-4=$d/1000-of-1000/test/summary.json" \
       "1000 of 1000, lr 3e-4=$d/1000-of-1000/ermrl-lr3e-4/summary.json" \
@@ -298,19 +298,19 @@ step_fitness_1m() {  # the CartPole and Pendulum targets, a diagnostic: evolutio
   local d=docs/data/fitness-1m env s
   for env in CartPoleNoVel-v1 PendulumNoVel-v1; do
     s=$(echo "${env%NoVel-v1}" | tr '[:upper:]' '[:lower:]')
-    "$E" evolve --env "$env" --trials 60 --seeds 3 --timesteps 1000000 --fixed-iss 1.0 --ppo-lr 1e-4 \
+    "$E" evolve --env "$env" --trials 60 --seeds 3 --timesteps 1000000 --fixed-iss 1.0 --learning-rate 1e-4 \
         --study "$s-1res-fitness-1m" --storage "$d/studies.log" --out "runs/fitness-1m/$s" --quiet
     "$E" select --study "$s-1res-fitness-1m" --storage "$d/studies.log" --out "runs/fitness-1m/$s" --top 5 --seeds 5 --quiet
     [ -f "$d/$s/test/summary.json" ] || {
       "$E" test --study "$s-1res-fitness-1m" --storage "$d/studies.log" --out "runs/fitness-1m/$s" --seeds 10 \
-          --timesteps 1000000 --ermrl-lr 1e-4 --ppo-lr 3e-4 --baseline-store docs/data/baseline-models --quiet
+          --timesteps 1000000 --learning-rate 1e-4 --baseline-learning-rate 3e-4 --baseline-store docs/data/baseline-models --quiet
       mkdir -p "$d/$s/test"
       cp "runs/fitness-1m/$s"/test/{summary.json,summary.csv,curves.csv,test_config.json,test_phase.png} "$d/$s/test/"
     }
   done
   # the default Φ (sr 0.95, lr 0.5, iss 1), not evolved, on the same test seeds: what the Pendulum evolutions miss
   [ -f "$d/default-phi-pendulum/summary.json" ] || "$E" train --env PendulumNoVel-v1 --sr 0.95 --leak-rate 0.5 --iss 1.0 \
-      --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet \
+      --seeds 10 --first-seed 1000 --timesteps 1000000 --learning-rate 1e-4 --no-save-agents --quiet \
       --out "$d/default-phi-pendulum"
 }
 step_sizes() {  # C14: CartPoleNoVel and PendulumNoVel at 25 to 1000 units, small evolutions, each tested 10 × 1M
@@ -332,7 +332,7 @@ step_sizes_medium() {  # C14 and the Pendulum target: PendulumNoVel at 500 and 1
   run reservoir-sizes medium --only pendulum-500u pendulum-1000u "${TEST10[@]}"
   local d=docs/data/reservoir-sizes-medium s=docs/data/reservoir-sizes-small
   [ -f "$d/default-phi-500u/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 \
-      --iss 1.0 --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet \
+      --iss 1.0 --seeds 10 --first-seed 1000 --timesteps 1000000 --learning-rate 1e-4 --no-save-agents --quiet \
       --out "$d/default-phi-500u"
   .venv/bin/python benchmarks/variant_summary.py "500 units=$d/pendulum-500u/test/summary.json" \
       "1000 units=$d/pendulum-1000u/test/summary.json" "500 units small=$s/pendulum-500u/test/summary.json" \
@@ -352,7 +352,7 @@ step_sizes_medium_lr3e4() {  # C6 / the Pendulum target, a diagnostic: the 500-u
   phi=$(phi_flags "$d/studies.log" reservoir-sizes-medium-pendulum-500u)
   # shellcheck disable=SC2086
   [ -f "$d/pendulum-500u/ermrl-lr3e-4/summary.json" ] || "$E" train --env PendulumNoVel-v1 $phi --units 500 \
-      --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 3e-4 --no-save-agents --quiet \
+      --seeds 10 --first-seed 1000 --timesteps 1000000 --learning-rate 3e-4 --no-save-agents --quiet \
       --out "$d/pendulum-500u/ermrl-lr3e-4"
   .venv/bin/python benchmarks/variant_summary.py "500 units, lr 1e-4=$d/pendulum-500u/test/summary.json" \
       "500 units, lr 3e-4=$d/pendulum-500u/ermrl-lr3e-4/summary.json" \
@@ -370,7 +370,7 @@ step_pendulum_paper_500u_interim() {  # a diagnostic of step `pendulum_paper_500
   # compared with the `medium` 500-unit Φ* and the default Φ at 500 units (step `sizes_medium`)
   local d=docs/data/reservoir-sizes-paper/interim-trial55 m=docs/data/reservoir-sizes-medium
   [ -f "$d/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 --sr 0.06239118054509163 \
-      --leak-rate 0.11866375803947449 --iss 1.0 --seeds 10 --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 \
+      --leak-rate 0.11866375803947449 --iss 1.0 --seeds 10 --first-seed 1000 --timesteps 1000000 --learning-rate 1e-4 \
       --no-save-agents --quiet --out "$d"
   .venv/bin/python benchmarks/variant_summary.py "paper-scale best after 150 trials=$d/summary.json" \
       "medium Φ*=$m/pendulum-500u/test/summary.json" "default Φ=$m/default-phi-500u/summary.json" \
@@ -401,13 +401,13 @@ step_pendulum_500u_near_default() {  # the Pendulum target, a departure from the
   # at 500 units and the 3e-4-evolved `medium` Φ*. ≈ 26 min a generation here (alone); resumes by generations
   local s=pendulum-500u-near-default d=docs/data/pendulum-500u-near-default m=docs/data/reservoir-sizes-medium phi
   "$E" evolve --env PendulumNoVel-v1 --units 500 --reservoirs 1 --fixed-iss 1.0 --trials 18 --seeds 3 \
-      --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
+      --timesteps 1000000 --learning-rate 1e-4 --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
       --study "$s" --storage "$d/studies.log" --out "runs/$s" --quiet
   "$E" select --study "$s" --storage "$d/studies.log" --out "runs/$s" --top 3 --seeds 3 --quiet
   phi=$(phi_flags "$d/studies.log" "$s")
   # shellcheck disable=SC2086
   [ -f "$d/ermrl/summary.json" ] || "$E" train --env PendulumNoVel-v1 --units 500 $phi --seeds 10 \
-      --first-seed 1000 --timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet --out "$d/ermrl"
+      --first-seed 1000 --timesteps 1000000 --learning-rate 1e-4 --no-save-agents --quiet --out "$d/ermrl"
   .venv/bin/python benchmarks/variant_summary.py "evolved near the default=$d/ermrl/summary.json" \
       "default Φ=$m/default-phi-500u/summary.json" "evolved at 3e-4 (medium)=$m/pendulum-500u/test/summary.json" \
       --compare "evolved near the default" "default Φ" --compare "evolved near the default" "evolved at 3e-4 (medium)" \
@@ -441,7 +441,7 @@ step_pendulum_500u_near_default_wide_50() {  # the Pendulum target: step pendulu
   mkdir -p "$d"
   [ -f "$d/studies.log" ] || cp "docs/data/$s/studies.log" "$d/studies.log"
   "$E" evolve --env PendulumNoVel-v1 --units 500 --reservoirs 1 --fixed-iss 1.0 --trials 50 --seeds 8 --popsize 10 \
-      --seed-schedule generation --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
+      --seed-schedule generation --timesteps 1000000 --learning-rate 1e-4 --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
       --study "$s" --storage "$d/studies.log" --out "runs/$s-50" --batch 2 --quiet
   "$E" select --study "$s" --storage "$d/studies.log" --out "runs/$s-50" --top 4 --seeds 8 --quiet | tee "$d/selection.txt"
   if [ "$(phi_flags "$d/studies.log" "$s")" = "$(phi_flags "docs/data/$s/studies.log" "$s")" ]; then
@@ -449,7 +449,7 @@ step_pendulum_500u_near_default_wide_50() {  # the Pendulum target: step pendulu
     return
   fi
   # shellcheck disable=SC2046
-  train_saved "$d/test" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 $(phi_flags "$d/studies.log" "$s")
+  train_saved "$d/test" --env PendulumNoVel-v1 --units 500 --learning-rate 1e-4 $(phi_flags "$d/studies.log" "$s")
   .venv/bin/python benchmarks/variant_summary.py "50 trials=$d/test/summary.json" "40 trials=$t/summary.json" \
       "default Φ=$m/default-phi-500u/summary.json" --compare "50 trials" "40 trials" --compare "50 trials" "default Φ" \
       --title "500 units, CMA-ES near the default Φ, 8 seeds a trial, 50 trials" --figure "$d/pendulum.png" \
@@ -461,7 +461,7 @@ step_pendulum_500u_more_seeds() {  # the Pendulum target, a diagnostic: the 8-se
   # narrow the estimate. ≈ 7.5 min a model here
   local d=docs/data/pendulum-500u-near-default-wide/seeds-1010 s=pendulum-500u-near-default-wide
   local m=docs/data/reservoir-sizes-medium t=docs/data/deterministic-eval/pendulum-500u-near-default-wide
-  local more=(--env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 --seeds 10 --first-seed 1010 --timesteps 1000000
+  local more=(--env PendulumNoVel-v1 --units 500 --learning-rate 1e-4 --seeds 10 --first-seed 1010 --timesteps 1000000
               --no-save-agents --quiet)
   # shellcheck disable=SC2046
   [ -f "$d/evolved/summary.json" ] || "$E" train "${more[@]}" $(phi_flags "docs/data/$s/studies.log" "$s") \
@@ -497,11 +497,11 @@ near_default_wide() {  # near_default_wide UNITS: the CMA-ES of step pendulum_50
   # 1M, then the Φ* trained on the test seeds with its agents saved (the model step deterministic_eval evaluates)
   local s="pendulum-$1u-near-default-wide"
   "$E" evolve --env PendulumNoVel-v1 --units "$1" --reservoirs 1 --fixed-iss 1.0 --trials 40 --seeds 8 --popsize 10 \
-      --seed-schedule generation --timesteps 1000000 --ppo-lr 1e-4 --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
+      --seed-schedule generation --timesteps 1000000 --learning-rate 1e-4 --min-sr 0.1 --max-sr 10 --min-leak-rate 0.1 --max-leak-rate 1.0 \
       --study "$s" --storage "docs/data/$s/studies.log" --out "runs/$s" --quiet
   "$E" select --study "$s" --storage "docs/data/$s/studies.log" --out "runs/$s" --top 4 --seeds 8 --quiet
   # shellcheck disable=SC2046
-  train_saved "docs/data/deterministic-eval/$s" --env PendulumNoVel-v1 --units "$1" --ppo-lr 1e-4 \
+  train_saved "docs/data/deterministic-eval/$s" --env PendulumNoVel-v1 --units "$1" --learning-rate 1e-4 \
       $(phi_flags "docs/data/$s/studies.log" "$s")
 }
 step_probe_sizes() {  # C4 at C14's sizes: velocity R² of the 500-unit CartPole Φ* (`small`, the target's) and the
@@ -625,35 +625,35 @@ step_deterministic_eval() {  # the targets on rl-zoo's metric: the agents of the
   # 50 fresh episodes (`ermrl analyze evaluate`), beside its training score (final). ≈ 13 min a 500-unit Pendulum
   # model here, ≈ 5 min a CartPole one, ≈ 3 min a PPO baseline
   local d=docs/data/deterministic-eval
-  train_saved "$d/pendulum-default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 --iss 1.0 --ppo-lr 1e-4
+  train_saved "$d/pendulum-default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 --iss 1.0 --learning-rate 1e-4
   # shellcheck disable=SC2046
-  train_saved "$d/pendulum-medium-500u" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 \
+  train_saved "$d/pendulum-medium-500u" --env PendulumNoVel-v1 --units 500 --learning-rate 1e-4 \
       $(phi_flags docs/data/reservoir-sizes-medium/studies.log reservoir-sizes-medium-pendulum-500u)
   local s  # the other evolved Pendulum Φ*: steps pendulum_{500u,500u_wide,100u_wide}_near_default, pendulum{_500u,}_lr1e4
   for s in 500u-near-default 500u-near-default-wide 100u-near-default-wide 500u-lr1e-4 lr1e-4; do
     # shellcheck disable=SC2046
     train_saved "$d/pendulum-$s" --env PendulumNoVel-v1 --units "$(case $s in lr1e-4 | 100u-*) echo 100 ;; *) echo 500 ;; esac)" \
-        --ppo-lr 1e-4 $(phi_flags "docs/data/pendulum-$s/studies.log" "pendulum-$s")
+        --learning-rate 1e-4 $(phi_flags "docs/data/pendulum-$s/studies.log" "pendulum-$s")
   done
-  train_saved "$d/pendulum-default-phi" --env PendulumNoVel-v1 --sr 0.95 --leak-rate 0.5 --iss 1.0 --ppo-lr 1e-4
-  train_saved "$d/pendulum-ppo" --env PendulumNoVel-v1 --no-reservoir --ppo-lr 3e-4
-  train_saved "$d/pendulum-ppo-full-obs" --env Pendulum-v1 --no-reservoir --ppo-lr 3e-4
+  train_saved "$d/pendulum-default-phi" --env PendulumNoVel-v1 --sr 0.95 --leak-rate 0.5 --iss 1.0 --learning-rate 1e-4
+  train_saved "$d/pendulum-ppo" --env PendulumNoVel-v1 --no-reservoir --learning-rate 3e-4
+  train_saved "$d/pendulum-ppo-full-obs" --env Pendulum-v1 --no-reservoir --learning-rate 3e-4
   # shellcheck disable=SC2046
-  train_saved "$d/cartpole-fitness-1m" --env CartPoleNoVel-v1 --ppo-lr 1e-4 \
+  train_saved "$d/cartpole-fitness-1m" --env CartPoleNoVel-v1 --learning-rate 1e-4 \
       $(phi_flags docs/data/fitness-1m/studies.log cartpole-1res-fitness-1m)
   # shellcheck disable=SC2046
-  train_saved "$d/cartpole-paper" --env CartPoleNoVel-v1 --ppo-lr 3e-4 \
+  train_saved "$d/cartpole-paper" --env CartPoleNoVel-v1 --learning-rate 3e-4 \
       $(phi_flags docs/data/partial-observability-paper/studies.log partial-observability-paper-cartpole-1res)
-  train_saved "$d/cartpole-ppo" --env CartPoleNoVel-v1 --no-reservoir --ppo-lr 3e-4
+  train_saved "$d/cartpole-ppo" --env CartPoleNoVel-v1 --no-reservoir --learning-rate 3e-4
   # LunarLander's `small` Φ* (2 reservoirs) at the paper's lr 1e-4 and 3M steps, where its test phase ended at 185.9:
   # host envs, ≈ 55 min here (2026-11-26); it resumes from OUT.snapshot (every 5 min) after a stop
   # shellcheck disable=SC2046
-  train_saved "$d/lunarlander-small-2res" --env LunarLanderNoVel-v3 --reservoirs 2 --ppo-lr 1e-4 --env-workers 0 \
+  train_saved "$d/lunarlander-small-2res" --env LunarLanderNoVel-v3 --reservoirs 2 --learning-rate 1e-4 --env-workers 0 \
       --timesteps 3000000 $(phi_flags docs/data/partial-observability-small/studies.log \
       partial-observability-small-lunarlander-2res)
   # and the `medium` Φ* at lr 3e-4, the model that met the target on the paper's score (step lunarlander_lr3e4)
   # shellcheck disable=SC2046
-  train_saved "$d/lunarlander-medium-2res-lr3e-4" --env LunarLanderNoVel-v3 --reservoirs 2 --ppo-lr 3e-4 \
+  train_saved "$d/lunarlander-medium-2res-lr3e-4" --env LunarLanderNoVel-v3 --reservoirs 2 --learning-rate 3e-4 \
       --env-workers 0 --timesteps 3000000 $(phi_flags docs/data/partial-observability-medium/studies.log \
       partial-observability-medium-lunarlander-2res)
   "$E" analyze evaluate "$d"/lunarlander-{small-2res,medium-2res-lr3e-4} --episodes 50 --out "$d/lunarlander.md"
@@ -669,7 +669,7 @@ step_pendulum_rlzoo_ppo() {  # the Pendulum target, a diagnostic of its PPO sett
   # Φ at both sizes) and PPO, trained with those settings, once, on the test seeds 10 × 1M, then each paired seed by
   # seed with its run at the paper's settings and evaluated on rl-zoo's metric. ≈ 8 min a 500-unit model here
   local d=docs/data/pendulum-rlzoo-ppo e=docs/data/deterministic-eval s
-  local zoo=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2
+  local zoo=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --learning-rate 1e-3 --clip-range 0.2
              --ent-coef 0.0)
   for s in 500 100; do
     # shellcheck disable=SC2046
@@ -710,7 +710,7 @@ step_pendulum_normalize() {  # the Pendulum target, a diagnostic of input normal
   local d=docs/data/pendulum-normalize s=pendulum-500u-near-default-wide e=docs/data/deterministic-eval
   local m=docs/data/pendulum-500u-near-default-wide/seeds-1010 phi
   phi=$(phi_flags "docs/data/$s/studies.log" "$s")
-  local dev=(--env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 --normalize --seeds 10 --first-seed 1010
+  local dev=(--env PendulumNoVel-v1 --units 500 --learning-rate 1e-4 --normalize --seeds 10 --first-seed 1010
              --timesteps 1000000 --no-save-agents --quiet)
   # shellcheck disable=SC2086
   [ -f "$d/dev/evolved/summary.json" ] || "$E" train "${dev[@]}" $phi --out "$d/dev/evolved"
@@ -722,8 +722,8 @@ step_pendulum_normalize() {  # the Pendulum target, a diagnostic of input normal
       --compare "default Φ, normalized" "default Φ" --title "500 units, seeds 1010-1019" \
       --figure "$d/dev/pendulum.png" | tee "$d/dev/summary.md"
   # shellcheck disable=SC2086
-  train_saved "$d/evolved-500u" --env PendulumNoVel-v1 --units 500 --ppo-lr 1e-4 --normalize $phi
-  train_saved "$d/default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 --iss 1.0 --ppo-lr 1e-4 \
+  train_saved "$d/evolved-500u" --env PendulumNoVel-v1 --units 500 --learning-rate 1e-4 --normalize $phi
+  train_saved "$d/default-phi-500u" --env PendulumNoVel-v1 --units 500 --sr 0.95 --leak-rate 0.5 --iss 1.0 --learning-rate 1e-4 \
       --normalize
   train_saved "$d/ppo" --env PendulumNoVel-v1 --no-reservoir --normalize
   train_saved "$d/ppo-full-obs" --env Pendulum-v1 --no-reservoir --normalize
@@ -747,7 +747,7 @@ step_pendulum_rlzoo_sde() {  # the Pendulum target, rl-zoo's PendulumNoVel recip
   local d=docs/data/pendulum-rlzoo-sde s=pendulum-500u-near-default-wide e=docs/data/deterministic-eval phi
   local p=docs/data/pendulum-rlzoo-ppo m=docs/data/pendulum-500u-near-default-wide/seeds-1010
   phi=$(phi_flags "docs/data/$s/studies.log" "$s")
-  local zoo=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2
+  local zoo=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --learning-rate 1e-3 --clip-range 0.2
              --ent-coef 0.0 --use-sde --sde-sample-freq 4)
   [ -f "$d/ppo-pendulum-100k/summary.json" ] || "$E" train --env Pendulum-v1 --no-reservoir --seeds 10 \
       --first-seed 1000 --timesteps 100000 "${zoo[@]}" --quiet --out "$d/ppo-pendulum-100k"
@@ -777,7 +777,7 @@ step_pendulum_rlzoo_sde() {  # the Pendulum target, rl-zoo's PendulumNoVel recip
   "$E" analyze evaluate "$d"/{evolved-500u,default-phi-500u,ppo,ppo-full-obs} --episodes 50 --out "$d/evaluation.md"
 }
 # rl-baselines3-zoo's tuned PendulumNoVel-v1 settings (hyperparams/ppo_lstm.yml), and its policy (RLZOO_POLICY)
-RLZOO_PENDULUM=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --ppo-lr 1e-3 --clip-range 0.2
+RLZOO_PENDULUM=(--n-envs 4 --n-steps 1024 --gamma 0.9 --gae-lambda 0.95 --n-epochs 10 --learning-rate 1e-3 --clip-range 0.2
                 --ent-coef 0.0 --use-sde --sde-sample-freq 4 --normalize)
 RLZOO_POLICY=(--net-arch 64 --activation relu --no-ortho-init)
 step_pendulum_rlzoo_policy() {  # the Pendulum target, rl-zoo's PendulumNoVel policy: one 64-unit hidden layer,
@@ -790,7 +790,7 @@ step_pendulum_rlzoo_policy() {  # the Pendulum target, rl-zoo's PendulumNoVel po
   local d=docs/data/pendulum-rlzoo-policy s=pendulum-500u-near-default-wide e=docs/data/deterministic-eval phi
   local z=docs/data/pendulum-rlzoo-sde m=docs/data/pendulum-500u-near-default-wide/seeds-1010 v
   phi=$(phi_flags "docs/data/$s/studies.log" "$s")
-  local zoo=("${RLZOO_PENDULUM[@]}" "${RLZOO_POLICY[@]}") paper=(--ppo-lr 1e-4 "${RLZOO_POLICY[@]}")
+  local zoo=("${RLZOO_PENDULUM[@]}" "${RLZOO_POLICY[@]}") paper=(--learning-rate 1e-4 "${RLZOO_POLICY[@]}")
   for v in zoo paper; do
     local -n flags=$v
     # shellcheck disable=SC2086
