@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ermrl import provenance, summary_schema
+from ermrl import model_labels, provenance, summary_schema
 from ermrl.atomic import atomic_path, check_file, check_folder, repair_journal, staged_folder  # noqa: F401
 from ermrl.codec import OMIT_WHEN_DEFAULT, from_dict, to_dict  # noqa: F401  (the configs' codec, re-exported)
 from ermrl.codec import json_default as _json_default
@@ -78,7 +78,8 @@ def write_curves_csv(path: Path, curves: Curves, seeds: dict[str, np.ndarray]) -
 
 
 def read_curves_csv(path: Path) -> Curves:
-    """Inverse of :func:`write_curves_csv`: {model: (timesteps (I,), values (S, I))}, NaN where a seed has none.
+    """Inverse of :func:`write_curves_csv`: {model: (timesteps (I,), values (S, I))}, NaN where a seed has none;
+    a model labelled by an older version under its label today (:func:`ermrl.model_labels.current`).
 
     Raises ConfigError naming the file when it is not a curves file."""
     cells: dict[str, dict[int, dict[int, float]]] = {}
@@ -90,7 +91,8 @@ def read_curves_csv(path: Path) -> Curves:
                     fields = [v for k, v in row.items() if k is not None and v is not None] + row.get(None, [])
                     raise ValueError(f"line {reader.line_num} has {len(fields)} fields, not {len(reader.fieldnames)}")
                 val = float(row["mean_return_100"]) if row["mean_return_100"] else np.nan
-                cells.setdefault(row["model"], {}).setdefault(int(row["seed"]), {})[int(row["timestep"])] = val
+                model = model_labels.current(row["model"])
+                cells.setdefault(model, {}).setdefault(int(row["seed"]), {})[int(row["timestep"])] = val
         if not cells:
             raise ValueError("no rows")
     except (KeyError, ValueError, TypeError) as e:
@@ -230,7 +232,8 @@ def _fmt_cell(v) -> str:
 
 
 def read_test_summary(out: Path) -> list[dict] | None:
-    """The rows (one per model) of the test phase in folder ``out`` (its summary.json); None when it has none.
+    """The rows (one per model) of the test phase in folder ``out`` (its summary.json); None when it has none. A
+    model labelled by an older version reads under its label today (:func:`ermrl.model_labels.current`).
 
     Raises a one-line ConfigError naming the file when it is not a summary that ermrl wrote: not JSON (cut short,
     not UTF-8), not a non-empty list of rows, or a row without a field it needs or with a
@@ -242,7 +245,15 @@ def read_test_summary(out: Path) -> list[dict] | None:
     if problem is not None:
         env = Path(out).name.removeprefix("test-") if Path(out).name.startswith("test-") else None
         raise ConfigError(f"{problem}; rerun `ermrl test{' --env ' + env if env else ''}` to write it again")
-    return read_json(path)
+    return [_current_labels(row) for row in read_json(path)]
+
+
+def _current_labels(row: dict) -> dict:
+    """A test summary's row with its model's label, and those its improvement is over, in today's wording."""
+    row = {**row, "model": model_labels.current(row["model"])}
+    if isinstance(row.get("improvement"), dict):
+        row["improvement"] = {model_labels.current(k): v for k, v in row["improvement"].items()}
+    return row
 
 
 def test_summary_problem(out: Path) -> str | None:

@@ -30,7 +30,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--timesteps", type=int, default=300_000)
     p.add_argument("--seeds", type=int, default=3)
-    p.add_argument("--ppo-lr", type=float, default=3e-4)
+    p.add_argument("--learning-rate", type=float, default=3e-4)
     p.add_argument("--out", type=Path, default=Path("docs/figures/cartpole_novel"))
     a = p.parse_args()
     curves = {}
@@ -38,7 +38,7 @@ def main() -> None:
     print("|---|---|---|---|---|")
     for label, (env_id, k) in MODELS.items():
         config = TrainConfig(env_id=env_id, total_timesteps=a.timesteps, agent=AgentConfig(reservoirs=k))
-        res = train(config, Population.grid(Phi(0.95, 0.5, 1.0), a.seeds, a.ppo_lr, k))
+        res = train(config, Population.grid(Phi(0.95, 0.5, 1.0), a.seeds, a.learning_rate, k))
         fit = res.fitness()
         curves[label] = res.curves()
         per_seed = ", ".join(f"{v:.1f}" for v in fit)

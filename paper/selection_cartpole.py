@@ -47,13 +47,13 @@ def main() -> None:
     p.add_argument("--select-seeds", type=int, default=5)
     p.add_argument("--test-seeds", type=int, default=10)
     p.add_argument("--test-timesteps", type=int, default=300_000)
-    p.add_argument("--ppo-lr", type=float, default=3e-4)
+    p.add_argument("--learning-rate", type=float, default=3e-4)
     p.add_argument("--storage", default="runs/selection_cartpole.log", help="journal file holding the studies")
     p.add_argument("--out", type=Path, default=Path("runs/selection_cartpole.json"))
     a = p.parse_args()
 
     train = TrainConfig(env_id=ENV, total_timesteps=a.timesteps, agent=AgentConfig(reservoirs=1))
-    train = dataclasses.replace(train, ppo=dataclasses.replace(train.ppo, learning_rate=a.ppo_lr))
+    train = dataclasses.replace(train, ppo=dataclasses.replace(train.ppo, learning_rate=a.learning_rate))
     test_train = dataclasses.replace(train, total_timesteps=a.test_timesteps)
     test_seeds = list(range(FIRST_TEST_SEED, FIRST_TEST_SEED + a.test_seeds))
     url = f"journal:{a.storage}"
@@ -73,7 +73,7 @@ def main() -> None:
         winner = next(t for t in ranked_trials(study) if t.number == sel.winner)
         tested = [best] if winner.number == best.number else [best, winner]
         phis = [config.space.phi_from_params(t.params) for t in tested]
-        res = Trainer(test_train).run(Population.grid(phis, test_seeds, a.ppo_lr, 1))
+        res = Trainer(test_train).run(Population.grid(phis, test_seeds, a.learning_rate, 1))
         fit = res.fitness().reshape(len(tested), len(test_seeds))
         fit[~res.finite.reshape(len(tested), len(test_seeds))] = np.nan
         test = {t.number: [None if not np.isfinite(v) else float(v) for v in row] for t, row in zip(tested, fit)}

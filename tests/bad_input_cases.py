@@ -37,10 +37,11 @@ CASES = [
                          "[9.999999680285692e+37]"),
     ("train --leak-rate 0", "ermrl train: error: --leak-rate must be positive and finite, got [0.0]"),
     ("train --lr 3e-4", "ermrl train: error: --lr is ambiguous: the reservoir's leak rate is --leak-rate, PPO's "
-                        "learning rate is --ppo-lr (ER-MRL's in a test phase: --ermrl-lr); see `ermrl train --help`"),
+                        "learning rate is --learning-rate (in a test phase, the PPO baselines': "
+                        "--baseline-learning-rate); see `ermrl train --help`"),
     ("evolve --min-lr 0.1", "ermrl evolve: error: --min-lr is ambiguous: the reservoir's leak rate is "
-                            "--min-leak-rate, PPO's learning rate is --ppo-lr (ER-MRL's in a test phase: --ermrl-lr); "
-                            "see `ermrl evolve --help`"),
+                            "--min-leak-rate, PPO's learning rate is --learning-rate (in a test phase, the PPO "
+                            "baselines': --baseline-learning-rate); see `ermrl evolve --help`"),
     ("train --env CartPolee-v1", "ermrl train: error: unknown env id 'CartPolee-v1': Gymnasium has no "
                                  "'CartPolee-v1'; did you mean CartPole-v1, CartPole-v0, CartPoleNoVel-v1?"),
     ("train --env Blackjack-v1", "ermrl train: error: env 'Blackjack-v1' has observation space Tuple(Discrete(32), "
@@ -72,7 +73,8 @@ CASES = [
     ("train --observed-units 1000", "ermrl train: error: observed_units must be in [1, 100], got 1000"),
     ("train --env-workers -1", "ermrl train: error: argument --env-workers: must be 'auto' or an integer >= 0, got "
                                "'-1'; see `ermrl train --help`"),
-    ("train --ppo-lr nan", "ermrl train: error: learning rate nan is outside (0, 1); the paper uses 3e-4 or 1e-4"),
+    ("train --learning-rate nan", "ermrl train: error: learning rate nan is outside (0, 1); the paper uses 3e-4 or "
+                                  "1e-4"),
     ("train --gamma 1.5", "ermrl train: error: gamma 1.5 is outside (0, 1]; SB3's default is 0.99"),
     ("evolve --gae-lambda -0.1", "ermrl evolve: error: gae_lambda -0.1 is outside [0, 1]; SB3's default is 0.95"),
     ("train --clip-range 0", "ermrl train: error: clip_range must be positive and finite, got 0.0; SB3's default is 0.2"),
@@ -160,11 +162,10 @@ CASES = [
     ("train --config evolvekey.toml",
      "ermrl train: error: config file evolvekey.toml: unknown option 'trials' for `ermrl train`; options here: "
      "activation, backend, batch-size, bias, bias-scaling, clip-range, ent-coef, env, env-threads, env-workers, "
-     "feed-action, "
-     "first-seed, gae-lambda, gamma, input-connectivity, iss, lr, lstm-hidden, lstm-seq-len, max-grad-norm, model, "
-     "n-envs, n-epochs, n-steps, net-arch, no-reservoir, normalize, observed-units, ortho-init, out, ppo-lr, preset, "
-     "quiet, rc-connectivity, reservoirs, save-agents, sde-sample-freq, seeds, skip-connection, snapshot-every, sr, "
-     "tensorboard, timesteps, units, use-sde, vf-coef"),
+     "feed-action, first-seed, gae-lambda, gamma, input-connectivity, iss, leak-rate, learning-rate, lstm-hidden, "
+     "lstm-seq-len, max-grad-norm, model, n-envs, n-epochs, n-steps, net-arch, no-reservoir, normalize, "
+     "observed-units, ortho-init, out, preset, quiet, rc-connectivity, reservoirs, save-agents, sde-sample-freq, "
+     "seeds, skip-connection, snapshot-every, sr, tensorboard, timesteps, units, use-sde, vf-coef"),
     ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "
                                 "integer"),
     ("train --config float.toml", "ermrl train: error: config file float.toml: units must be an integer, got 2.5"),
@@ -243,7 +244,7 @@ CASES = [
                             "(log-uniform)"),
     ("evolve --min-sr 10 --max-sr 1", "ermrl evolve: error: bad sr bounds [10.0, 1.0]: need 0 < --min-sr < --max-sr "
                                       "(log-uniform)"),
-    ("evolve --max-leak-rate 2", "ermrl evolve: error: bad lr bounds [0.01, 2.0]: a leak rate is at most 1; use "
+    ("evolve --max-leak-rate 2", "ermrl evolve: error: bad leak-rate bounds [0.01, 2.0]: a leak rate is at most 1; use "
                                  "--max-leak-rate 1"),
     ("evolve --fixed-iss nan", "ermrl evolve: error: --fixed-iss must be positive, got nan"),
     ("evolve --reservoirs 0", "ermrl evolve: error: evolution needs at least 1 reservoir, got 0"),
@@ -317,8 +318,8 @@ CASES = [
     ("select --study s --storage missing.log", "ermrl select: error: no study 's': missing.log does not exist; run "
                                                "`ermrl evolve` first or pass --storage/--out"),
     ("test --study s --seeds 0", "ermrl test: error: --seeds must be in 1..10,000 (the paper tests on 10), got 0"),
-    ("test --study s --ermrl-lr 2", "ermrl test: error: learning rate 2.0 is outside (0, 1); the paper uses 3e-4 or "
-                                    "1e-4"),
+    ("test --study s --learning-rate 2", "ermrl test: error: learning rate 2.0 is outside (0, 1); the paper uses 3e-4 "
+                                         "or 1e-4"),
     ("test --study one --storage sqlite:///studies.db --seeds 1000000", "ermrl test: error: --seeds must be in "
      "1..10,000 (the paper tests on 10), got 1000000"),
     ("test --study one --storage sqlite:///studies.db --timesteps 100000000000000000000", "ermrl test: error: total "
@@ -462,4 +463,17 @@ CASES = [
                                 "test phase's OUT or OUT.partial folder"),
     ("reproduce --dry-run C0", "ermrl reproduce: error: unknown step or claim 'C0'; steps: "
      + " ".join(STEPS) + "; claims: " + " ".join(f"C{i}" for i in range(1, 18))),
+    # -- the learning rate's flags of older versions: refused, naming the flag of today ----------------------
+    ("train --ppo-lr 1e-4", "ermrl train: error: --ppo-lr is now --learning-rate (PPO's learning rate); see `ermrl "
+                            "train --help`"),
+    ("evolve --ppo-lr 1e-4", "ermrl evolve: error: --ppo-lr is now --learning-rate (PPO's learning rate); see `ermrl "
+                             "evolve --help`"),
+    ("baselines --env CartPole-v1 --ppo-lr 1e-4", "ermrl baselines: error: --ppo-lr is now --learning-rate (PPO's "
+                                                  "learning rate); see `ermrl baselines --help`"),
+    ("test --study s --ermrl-lr 3e-4 1e-4", "ermrl test: error: --ermrl-lr is now --learning-rate (the ER-MRL agents' "
+                                            "learning rates); see `ermrl test --help`"),
+    ("test --study s --ppo-lr 3e-4", "ermrl test: error: --ppo-lr is now --baseline-learning-rate (the PPO baselines' "
+                                     "learning rate); see `ermrl test --help`"),
+    ("experiment run partial-observability --test-lrs 1e-4", "ermrl experiment: error: --test-lrs is now "
+     "--test-learning-rates (ER-MRL's learning rates in every test phase); see `ermrl experiment run --help`"),
 ]

@@ -8,8 +8,8 @@ from ermrl.experiments import runner
 from cli_runs import ermrl as cli
 
 EXPERIMENT, STUDY = "partial-observability", "cartpole-1res"
-BUDGET = runner.TestBudget(seeds=2, timesteps=4096, ermrl_lrs=(1e-4, 3e-4))
-FLAGS = ["--test-seeds", "2", "--test-timesteps", "4096", "--test-lrs", "1e-4", "3e-4"]
+BUDGET = runner.TestBudget(seeds=2, timesteps=4096, learning_rates=(1e-4, 3e-4))
+FLAGS = ["--test-seeds", "2", "--test-timesteps", "4096", "--test-learning-rates", "1e-4", "3e-4"]
 RUN = ["experiment", "run", EXPERIMENT, "--only", STUDY, "--scale", "smoke", "--quiet", "--no-estimate"]
 
 

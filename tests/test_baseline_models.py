@@ -58,8 +58,9 @@ def test_a_second_test_phase_reuses_the_stored_ppo_baselines_and_retrains_a_dama
     ours, theirs = rows_by_model(second), rows_by_model(first)
     assert ours["PPO (same observation)"] == theirs["PPO (same observation)"]  # retrained: deterministic
     assert ours["PPO (full observation)"] == theirs["PPO (full observation)"]  # reused
-    assert [r["model"] for r in (first[0], second[0])] == ["ER-MRL (sr 0.95, lr 0.5, iss 1)",
-                                                           "ER-MRL (sr 0.2, lr 0.9, iss 1)"]  # another Φ
+    assert [r["model"] for r in (first[0], second[0])] == [
+        "ER-MRL (learning rate 0.0003; sr 0.95, leak rate 0.5, iss 1)",
+        "ER-MRL (learning rate 0.0003; sr 0.2, leak rate 0.9, iss 1)"]  # another Φ
     assert full.read_bytes() == full_bytes  # a hit leaves the file as it was
     identity, results = checkpoints.read_job(same)  # replaced by the retrained model, readable again
     assert results.fitness().tolist() == theirs["PPO (same observation)"]
@@ -94,11 +95,11 @@ def test_studies_evolved_at_other_rates_share_the_baselines_of_one_ppo_rate(tmp_
         return EvolveConfig(train=train, space=SearchSpace(1, fixed_iss=1.0), trials=2, seeds=1)
 
     store = tmp_path / "store"
-    test = evaluation.TestConfig(seeds=2, timesteps=2048, ppo_lr=3e-4)
+    test = evaluation.TestConfig(seeds=2, timesteps=2048, baseline_learning_rate=3e-4)
     at_1e4, at_3e4 = (evaluation.baseline_files(config(lr), test, store) for lr in (1e-4, 3e-4))
     assert at_1e4 == at_3e4 and len(at_1e4) == 2
     for _, _, train, population, _ in evaluation.baseline_jobs(config(1e-4).train, [1000, 1001], 3e-4, True):
         assert train.ppo.learning_rate == 3e-4 and np.allclose(population.learning_rate, 3e-4)
-    # without --ppo-lr the baselines train at each study's own rate, so they are kept apart
+    # without --baseline-learning-rate the baselines train at each study's own rate, so they are kept apart
     own = evaluation.TestConfig(seeds=2, timesteps=2048)
     assert evaluation.baseline_files(config(1e-4), own, store) != evaluation.baseline_files(config(3e-4), own, store)

@@ -128,4 +128,4 @@ def test_baselines_command_stores_both_constants_with_provenance(tmp_path):
     first, second = json.loads(other.read_text())["ppo"]
     assert (first["settings"], second["settings"]) == ({}, {"n_steps": 512, "gamma": 0.9})
     assert first["mean"] != second["mean"]  # 3 updates instead of none before the last episodes
-    assert second["command"].endswith("--ppo-lr 0.0003 --n-steps 512 --gamma 0.9")
+    assert second["command"].endswith("--learning-rate 0.0003 --n-steps 512 --gamma 0.9")

@@ -59,7 +59,7 @@ def test_help_explains_every_flag():
     assert top.returncode == 0 and "train" in top.stdout
     sub = ermrl("train", "--help")
     assert sub.returncode == 0
-    for flag in ("--env", "--units", "--sr", "--leak-rate", "--iss", "--seeds", "--first-seed", "--timesteps", "--no-reservoir", "--ppo-lr",
+    for flag in ("--env", "--units", "--sr", "--leak-rate", "--iss", "--seeds", "--first-seed", "--timesteps", "--no-reservoir", "--learning-rate",
                  "--out", "--reservoirs", "--feed-action", "--skip-connection", "--observed-units", "--bias", "--preset",
                  "--backend", "--env-workers"):
         assert flag in sub.stdout, flag
@@ -72,7 +72,7 @@ def test_help_explains_every_flag():
     (["--leak-rate", "1.5"], "ermrl train: error: --leak-rate must be in (0, 1], got [1.5]"),
     (["--sr", "-1"], "ermrl train: error: --sr must be positive and finite, got [-1.0]"),
     (["--reservoirs", "2", "--sr", "1", "2", "3"], "ermrl train: error: --sr got 3 values for 2 reservoirs; give one value or 2"),
-    (["--ppo-lr", "3"], "ermrl train: error: learning rate 3.0 is outside (0, 1)"),
+    (["--learning-rate", "3"], "ermrl train: error: learning rate 3.0 is outside (0, 1)"),
     (["--first-seed", "-1"], "ermrl train: error: --first-seed must be >= 0, got -1"),
 ])
 def test_bad_input_is_one_line_and_exit_code_2(args, message, tmp_path):

@@ -144,7 +144,8 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path):
     other = _summary(tmp_path / "other", SMALL)
     _curves(other.parent, np.ones((2, 3)), models=("ER-MRL lr 0.0003", "PPO (same observation)"))
     cases.append(((f"a={other}", "--figure", tmp_path / "f.png"),
-                  f"{other.parent / 'curves.csv'} has no curve of 'ER-MRL lr 0.0001'; give the curves.csv"))
+                  f"{other.parent / 'curves.csv'} has no curve of 'ER-MRL (learning rate 0.0001)'; give the "
+                  "curves.csv"))
     _refused(cases, tmp_path / "f.png")
 
 

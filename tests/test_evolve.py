@@ -167,7 +167,7 @@ def test_test_phase_and_report_from_a_tiny_study(tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["--min-sr", "10", "--max-sr", "1"], "ermrl evolve: error: bad sr bounds [10.0, 1.0]: need 0 < --min-sr < --max-sr"),
-    (["--max-leak-rate", "2"], "ermrl evolve: error: bad lr bounds [0.01, 2.0]: a leak rate is at most 1"),
+    (["--max-leak-rate", "2"], "ermrl evolve: error: bad leak-rate bounds [0.01, 2.0]: a leak rate is at most 1"),
     (["--sampler", "nsga"], "ermrl evolve: error: unknown sampler 'nsga'; choose one of cmaes, random, tpe"),
     (["--env", "Nope-v0"], "ermrl evolve: error: unknown env id 'Nope-v0'"),
     (["--storage", "postgresql://u:p@127.0.0.1:9/db"], "ermrl evolve: error: cannot open storage 'postgresql://u:***@127.0.0.1:9/db'"),

@@ -1,4 +1,5 @@
-"""`ermrl experiment run`'s test budgets (--test-seeds, --test-timesteps, --test-lrs, also from --config) and a
+"""`ermrl experiment run`'s test budgets (--test-seeds, --test-timesteps, --test-learning-rates, also from --config)
+and a
 test phase that resumes model by model, on the smoke study of CartPoleNoVel that conftest's ``evolved`` evolves
 once per session (smoke_study.py)."""
 
@@ -57,11 +58,12 @@ def interrupted(evolved, tmp_path_factory):
 def test_budget_flags_reach_the_test_phase_and_a_rerun_with_others_redoes_only_the_test(evolved, interrupted,
                                                                                        tmp_path):
     config = json.loads((evolved / STUDY / "test" / "test_config.json").read_text())
-    assert (config["seeds"], config["timesteps"], config["ermrl_lrs"], config["auc_steps"]) == (2, 4096, [1e-4, 3e-4],
-                                                                                                4096)
+    assert (config["seeds"], config["timesteps"], config["learning_rates"], config["auc_steps"]) == (
+        2, 4096, [1e-4, 3e-4], 4096)
     rows = json.loads((evolved / STUDY / "test" / "summary.json").read_text())
-    assert [(r["model"].split(" (")[0], r["n_seeds"], r["timesteps"]) for r in rows] == [
-        ("ER-MRL lr 0.0001", 2, 4096), ("ER-MRL lr 0.0003", 2, 4096), ("PPO", 2, 4096), ("PPO", 2, 4096)]
+    assert [(r["model"].split("; ")[0], r["n_seeds"], r["timesteps"]) for r in rows] == [
+        ("ER-MRL (learning rate 0.0001", 2, 4096), ("ER-MRL (learning rate 0.0003", 2, 4096),
+        ("PPO (same observation)", 2, 4096), ("PPO (full observation)", 2, 4096)]
     record = load_study(runner.default_storage(evolved), f"{EXPERIMENT}-smoke-{STUDY}").user_attrs["ermrl"]
     assert (record["seeds"], record["train"]["total_timesteps"]) == (1, 2048)  # the study's own budget, untouched
 
@@ -72,15 +74,15 @@ def test_budget_flags_reach_the_test_phase_and_a_rerun_with_others_redoes_only_t
     shutil.copytree(interrupted, folder)
     before = trials(folder)
     toml = tmp_path / "budgets.toml"
-    toml.write_text("test-seeds = 1\ntest-timesteps = 4096\ntest-lrs = [1e-4, 3e-4]\n")
+    toml.write_text("test-seeds = 1\ntest-timesteps = 4096\ntest-learning-rates = [1e-4, 3e-4]\n")
     r = cli(*RUN, "--out", str(folder), "--config", str(toml))
     assert r.returncode == 0, r.stderr
-    assert "test on CartPoleNoVel-v1: 1 seeds × 4,096 steps, ER-MRL at lr 0.0001, 0.0003" in r.stdout
+    assert "test on CartPoleNoVel-v1: 1 seeds × 4,096 steps, ER-MRL at learning rates 0.0001, 0.0003" in r.stdout
     assert "test on CartPoleNoVel-v1: discarded the models of an unfinished test phase with other settings" in r.stdout
     assert "from an earlier run" not in r.stdout
     assert trials(folder) == before
     config = json.loads((folder / STUDY / "test" / "test_config.json").read_text())
-    assert (config["seeds"], config["timesteps"], config["ermrl_lrs"]) == (1, 4096, [1e-4, 3e-4])
+    assert (config["seeds"], config["timesteps"], config["learning_rates"]) == (1, 4096, [1e-4, 3e-4])
     assert [r["n_seeds"] for r in json.loads((folder / STUDY / "test" / "summary.json").read_text())] == [1] * 4
     assert not (folder / STUDY / "test.partial").exists()
 
@@ -98,23 +100,46 @@ def test_the_estimate_counts_only_the_test_phases_left(evolved, interrupted):
 
     p, left, seconds = estimate(evolved, BUDGET)
     assert left == () and seconds == 0
-    test_seconds = (len(BUDGET.ermrl_lrs) + 2) * BUDGET.seeds * BUDGET.timesteps / runner.JAX_RATE
+    test_seconds = (len(BUDGET.learning_rates) + 2) * BUDGET.seeds * BUDGET.timesteps / runner.JAX_RATE
     assert runner.estimate_seconds([p], {p.study: p.config.trials}) == pytest.approx(runner.COMPILE_S + test_seconds)
     p, left, seconds_left = estimate(interrupted, BUDGET)
     assert left == p.tests and seconds_left == pytest.approx(runner.COMPILE_S + test_seconds)
-    p, left, _ = estimate(evolved, runner.TestBudget(seeds=3, timesteps=4096, ermrl_lrs=(1e-4, 3e-4)))
+    p, left, _ = estimate(evolved, runner.TestBudget(seeds=3, timesteps=4096, learning_rates=(1e-4, 3e-4)))
     assert left == p.tests
 
 
+def as_an_older_version_kept_it(partial: Path) -> None:
+    """Rewrites the unfinished test phase ``partial`` as versions before the learning rate's one name kept it: its
+    settings with the TestConfig keys ``ermrl_lrs`` and ``ppo_lr``, its ER-MRL model under the labels of then
+    ("ER-MRL lr 0.0001 (sr 0.95, lr 0.5, iss 1)")."""
+    settings = json.loads((partial / "settings.json").read_text())
+    old_names = {"learning_rates": "ermrl_lrs", "baseline_learning_rate": "ppo_lr"}
+    settings["test"] = {old_names.get(k, k): v for k, v in settings["test"].items()}
+    assert {"ermrl_lrs", "ppo_lr"} <= set(settings["test"])
+    (partial / "settings.json").write_text(json.dumps(settings))
+    with np.load(partial / "ermrl.npz") as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(str(arrays["meta"]))
+    phi = ", ".join(f"{n} {float(np.ravel(meta['identity']['phi'][n])[0]):.3g}" for n in ("sr", "lr", "iss"))
+    meta["identity"]["labels"] = [f"ER-MRL lr {rate:g} ({phi})" for rate in BUDGET.learning_rates]
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(partial / "ermrl.npz", **arrays)
+
+
+@pytest.mark.parametrize("kept_by", ["this version", "an older version"])
 def test_a_stopped_test_phase_keeps_its_finished_models_and_ends_as_an_uninterrupted_one(evolved, interrupted,
-                                                                                        tmp_path):
+                                                                                        tmp_path, kept_by):
+    """The rerun of a stopped test phase trains only the models it lacks, also when an older version kept them
+    (under the settings' old keys and the old labels), and writes what an uninterrupted run writes."""
     folder = tmp_path / "run"
     shutil.copytree(interrupted, folder)
+    if kept_by == "an older version":
+        as_an_older_version_kept_it(folder / STUDY / "test.partial")
     logs, started = [], []
     run_in_process(folder, logs.append, lambda label: started.append(label))
     kept = [line for line in logs if "from an earlier run" in line]
-    assert len(kept) == 1 and kept[0].startswith("    test on CartPoleNoVel-v1: kept ER-MRL lr 0.0001 (sr ")
-    assert "ER-MRL lr 0.0003 (sr " in kept[0]
+    assert len(kept) == 1 and kept[0].startswith("    test on CartPoleNoVel-v1: kept ER-MRL (learning rate 0.0001; sr ")
+    assert "ER-MRL (learning rate 0.0003; sr " in kept[0] and ", leak rate " in kept[0]
     assert "ER-MRL" not in started and started[-2:] == ["PPO (same observation)", "PPO (full observation)"]
     assert not any(label.startswith("evolve ") for label in started)  # its evolution was complete: no bar
     assert not (folder / STUDY / "test.partial").exists()
@@ -204,12 +229,18 @@ def test_agents_per_run_below_one_is_a_one_line_error_for_ermrl_test(evolved, tm
 BAD = [
     (["--test-seeds", "0"], "--test-seeds must be >= 1, got 0"),
     (["--test-timesteps", "-5"], "--test-timesteps must be >= 1, got -5"),
-    (["--test-lrs", "3e-4", "1.5"], "--test-lrs: learning rate 1.5 is outside (0, 1); the paper uses 3e-4 or 1e-4"),
-    (["--test-lrs", "0"], "--test-lrs: learning rate 0 is outside (0, 1); the paper uses 3e-4 or 1e-4"),
-    (["--test-lrs", "1e-4", "1e-4"], "--test-lrs gives 0.0001 twice; give each learning rate once"),
+    (["--test-learning-rates", "3e-4", "1.5"],
+     "--test-learning-rates: learning rate 1.5 is outside (0, 1); the paper uses 3e-4 or 1e-4"),
+    (["--test-learning-rates", "0"], "--test-learning-rates: learning rate 0 is outside (0, 1); the paper uses 3e-4 or "
+                                     "1e-4"),
+    (["--test-learning-rates", "1e-4", "1e-4"],
+     "--test-learning-rates gives 0.0001 twice; give each learning rate once"),
     (["--test-agents-per-run", "0"], "--test-agents-per-run must be >= 1, got 0"),
     (["--test-seeds", "two"], "argument --test-seeds: invalid int value: 'two'; see `ermrl experiment run --help`"),
-    (["--test-lrs"], "argument --test-lrs: expected at least one argument; see `ermrl experiment run --help`"),
+    (["--test-learning-rates"], "argument --test-learning-rates: expected at least one argument; see `ermrl experiment "
+                                "run --help`"),
+    (["--test-lrs", "1e-4"], "--test-lrs is now --test-learning-rates (ER-MRL's learning rates in every test phase); "
+                             "see `ermrl experiment run --help`"),
 ]
 
 
@@ -224,7 +255,9 @@ def test_bad_test_budgets_are_one_line_errors_before_any_work(flags, message, tm
 
 @pytest.mark.parametrize("text,message", [
     ("test-seeds = 0\n", "--test-seeds must be >= 1, got 0"),
-    ("test-lrs = []\n", "config file {path}: test-lrs takes at least one value, got an empty list"),
+    ("test-learning-rates = []\n",
+     "config file {path}: test-learning-rates takes at least one value, got an empty list"),
+    ("test-lrs = []\n", "config file {path}: test-lrs takes at least one value, got an empty list"),  # the old key
     ("test-timesteps = 1.5\n", "config file {path}: test-timesteps must be an integer, got 1.5"),
 ])
 def test_bad_test_budgets_in_a_config_file_are_one_line_errors(text, message, tmp_path, capsys):
@@ -238,18 +271,18 @@ def test_bad_test_budgets_in_a_config_file_are_one_line_errors(text, message, tm
 @pytest.mark.parametrize("scale", list(registry.SCALES))
 def test_budgets_override_every_test_phase_and_the_estimate_but_no_study(scale, tmp_path):
     experiment, s = registry.get(EXPERIMENT), registry.get_scale(scale)
-    budget = runner.TestBudget(seeds=10, timesteps=3_000_000, ermrl_lrs=(1e-4,))
+    budget = runner.TestBudget(seeds=10, timesteps=3_000_000, learning_rates=(1e-4,))
     plain, plans = runner.plan(experiment, s, tmp_path), runner.plan(experiment, s, tmp_path, budget=budget)
     assert [p.config for p in plans] == [p.config for p in plain]
     for p in plans:
-        assert [(t.seeds, t.timesteps, t.ermrl_lrs, t.auc_steps, t.ppo_lr) for t in p.tests] == [
-            (10, 3_000_000, (1e-4,), 300_000, p.spec.ppo_lr)]
+        assert [(t.seeds, t.timesteps, t.learning_rates, t.auc_steps, t.baseline_learning_rate) for t in p.tests] == [
+            (10, 3_000_000, (1e-4,), 300_000, p.spec.baseline_learning_rate)]
     assert [p.tests[0].timesteps for p in runner.plan(experiment, s, tmp_path, budget=runner.TestBudget(seeds=4))] \
         == [s.long_test_timesteps if p.spec.long_test else s.test_timesteps for p in plain]
     # the estimate counts the test phases at the budget's size (JAX envs: nominal rate; NoVel: 3 models here)
     jax_only = lambda ps: [p for p in ps if not p.spec.envs[0].startswith("LunarLander")]
     extra = runner.estimate_seconds(jax_only(plans)) - runner.estimate_seconds(jax_only(plain))
-    expected = sum(3 * 10 * 3_000_000 - (len(t.ermrl_lrs) + 2) * t.seeds * t.timesteps
+    expected = sum(3 * 10 * 3_000_000 - (len(t.learning_rates) + 2) * t.seeds * t.timesteps
                    for p in jax_only(plain) for t in p.tests) / runner.JAX_RATE
     assert extra == pytest.approx(expected)
 
@@ -293,7 +326,7 @@ def test_a_model_stopped_while_it_trains_resumes_from_its_snapshot(evolved, tmp_
 
     monkeypatch.setattr(evaluation.Trainer, "__init__", init)
     study = load_study(runner.default_storage(evolved), f"{EXPERIMENT}-smoke-{STUDY}")
-    test = evaluation.TestConfig(seeds=2, timesteps=4096, ermrl_lrs=(3e-4,))
+    test = evaluation.TestConfig(seeds=2, timesteps=4096, learning_rates=(3e-4,))
     out = tmp_path / "test"
 
     def stop_in_the_second_iteration(label):

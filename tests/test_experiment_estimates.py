@@ -23,7 +23,7 @@ def test_the_estimate_counts_the_reservoir_size(tmp_path):
     p = plans["1000-of-1000"]
     (t,) = p.tests
     whole = runner.estimate_seconds([p], {p.study: p.config.trials})
-    ppo_only = runner.estimate_seconds([dataclasses.replace(p, tests=(dataclasses.replace(t, ermrl_lrs=()),))],
+    ppo_only = runner.estimate_seconds([dataclasses.replace(p, tests=(dataclasses.replace(t, learning_rates=()),))],
                                        {p.study: p.config.trials})
     ppo_seconds = 2 * t.seeds * t.timesteps / runner.JAX_RATE  # PPO on the same and on the full observation
     assert ppo_only == pytest.approx(runner.COMPILE_S + ppo_seconds)
@@ -66,7 +66,7 @@ def test_the_estimate_counts_a_shared_baseline_once_and_a_stored_one_not_at_all(
     done = {q.study: q.config.trials for q in twins}
     (t,) = p.tests
     model_s = t.seeds * t.timesteps / runner.JAX_RATE
-    ermrl_s = len(t.ermrl_lrs) * model_s  # 100-unit reservoirs: no extra cost
+    ermrl_s = len(t.learning_rates) * model_s  # 100-unit reservoirs: no extra cost
     store = tmp_path / "store"
     assert runner.estimate_seconds(twins, done) == pytest.approx(2 * (runner.COMPILE_S + ermrl_s + 2 * model_s))
     assert runner.estimate_seconds(twins, done, store=store) == pytest.approx(

@@ -2,6 +2,7 @@
 tests on an unseen env, the named experiments at smoke scale, and statistics in the test summaries."""
 
 import json
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -29,7 +30,7 @@ def test_two_env_evolution_scores_each_env_and_tests_on_a_third(tmp_path):
             "--timesteps", "2048", "--fixed-iss", "1.0", "--study", "g", "--out", str(tmp_path), "--baselines", str(table),
             "--allow-weak-baselines", "--quiet", "--no-estimate")
     assert r.returncode == 0, r.stderr
-    assert "baselines: vanilla PPO on PendulumNoVel-v1 (1 seeds × 2,048 steps, lr 0.0003)" in r.stdout
+    assert "baselines: vanilla PPO on PendulumNoVel-v1 (1 seeds × 2,048 steps, learning rate 0.0003)" in r.stdout
     study = load_study(f"sqlite:///{tmp_path}/study.db", "g")
     assert study.user_attrs["ermrl"]["envs"] == envs
     constants = {e: resolve(e, 2048, 1, 3e-4, load_table(table)) for e in envs}
@@ -238,20 +239,24 @@ def test_every_experiment_runs_end_to_end_and_resumes(name, tmp_path):
 def test_every_experiment_runs_at_smoke_scale(name, tmp_path):
     text = run_smoke(name, tmp_path).read_text()
     if registry.get(name).hp_map:  # the HP map across studies and its leak-rate table, one row per study
-        assert "HP map across studies" in text and "lr against the other studies of K reservoirs" in text
+        assert "HP map across studies" in text and "leak rate against the other studies of K reservoirs" in text
         assert all(f"<td>{name}-smoke-{s.name}</td>" in text for s in registry.get(name).studies)
 
 
 def test_a_finished_test_phase_is_kept_across_new_test_config_fields(tmp_path):
-    """A test phase saved before a TestConfig field existed (here: recurrent_baseline) counts as done for the same
-    settings and Φ*, so a resumed experiment does not redo it; other settings or another Φ* redo it."""
+    """A test phase saved before a TestConfig field existed (here: recurrent_baseline), and before its learning
+    rates had their names of today (then ermrl_lrs and ppo_lr), counts as done for the same settings and Φ*, so a
+    resumed experiment does not redo it; other settings or another Φ* redo it."""
     import dataclasses
 
     from ermrl.experiments.evaluation import TestConfig
 
-    test = TestConfig(seeds=3, timesteps=4096, ermrl_lrs=(3e-4, 1e-4), env_id="Ant-v5", auc_steps=4096)
-    saved = {k: v for k, v in dataclasses.asdict(test).items() if k != "recurrent_baseline"}
-    (tmp_path / "test_config.json").write_text(json.dumps({**saved, "ermrl_lrs": [3e-4, 1e-4], "phi_trial": 7}))
+    test = TestConfig(seeds=3, timesteps=4096, learning_rates=(3e-4, 1e-4), baseline_learning_rate=3e-4,
+                      env_id="Ant-v5", auc_steps=4096)
+    old_names = {"learning_rates": "ermrl_lrs", "baseline_learning_rate": "ppo_lr"}
+    saved = {old_names.get(k, k): v for k, v in dataclasses.asdict(test).items() if k != "recurrent_baseline"}
+    assert saved["ermrl_lrs"] == (3e-4, 1e-4) and saved["ppo_lr"] == 3e-4
+    (tmp_path / "test_config.json").write_text(json.dumps({**saved, "phi_trial": 7}))
     assert not runner._test_done(tmp_path, test, 7)  # no summary yet: not finished
     row = {"model": "m", "env_id": "Ant-v5", "n_seeds": 3, "final_mean": 1.0, "final_std": 0.0, "auc_mean": 1.0,
            "auc_std": 0.0}
@@ -260,6 +265,22 @@ def test_a_finished_test_phase_is_kept_across_new_test_config_fields(tmp_path):
     assert not runner._test_done(tmp_path, test, 8)
     assert not runner._test_done(tmp_path, dataclasses.replace(test, seeds=4), 7)
     assert not runner._test_done(tmp_path, dataclasses.replace(test, recurrent_baseline=True), 7)
+    assert not runner._test_done(tmp_path, dataclasses.replace(test, learning_rates=(3e-4,)), 7)
+    assert not runner._test_done(tmp_path, dataclasses.replace(test, baseline_learning_rate=1e-4), 7)
+
+
+def test_a_committed_test_phase_of_an_older_version_counts_as_done():
+    """docs/data's test phases were written before the learning rates' names of today: their test_config.json
+    (ermrl_lrs, ppo_lr) still reads as the same settings, so an experiment resumed over them keeps them."""
+    from ermrl.experiments.evaluation import TestConfig
+
+    folder = Path(__file__).resolve().parents[1] / "docs/data/partial-observability-paper/cartpole-1res/test"
+    assert {"ermrl_lrs", "ppo_lr"} <= set(json.loads((folder / "test_config.json").read_text()))
+    test = TestConfig(seeds=10, timesteps=1_000_000, learning_rates=(3e-4, 1e-4, 5e-5), baseline_learning_rate=3e-4,
+                      auc_steps=300_000)
+    assert runner._test_done(folder, test, 43)
+    assert not runner._test_done(folder, TestConfig(seeds=10, timesteps=1_000_000, learning_rates=(3e-4,),
+                                                    baseline_learning_rate=3e-4, auc_steps=300_000), 43)
 
 
 def test_select_says_when_trials_tie_at_its_cut(tmp_path):

@@ -73,7 +73,7 @@ def read_points(path) -> dict[str, list[tuple]]:
         out = {}
         for row in reader:
             out.setdefault(row["study"], []).append((int(row["rank"]), int(row["trial"]), int(row["reservoir"]),
-                                                    float(row["sr"]), float(row["lr"])))
+                                                    float(row["sr"]), float(row["leak_rate"])))
     return out
 
 

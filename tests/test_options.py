@@ -35,7 +35,7 @@ def test_every_training_command_takes_every_agent_option_from_one_definition():
     expected_defaults = {"reservoirs": AgentConfig.reservoirs, "units": ReservoirSpec.units, "bias": ReservoirSpec.bias,
                          "rc_connectivity": 0.1, "input_connectivity": 0.1, "bias_scaling": 1.0,  # ReservoirPy's
                          "feed_action": AgentConfig.feed_action, "skip_connection": False,
-                         "observed_units": AgentConfig.observed_units, "preset": "sb3", "ppo_lr": None,
+                         "observed_units": AgentConfig.observed_units, "preset": "sb3", "learning_rate": None,
                          "timesteps": TrainConfig.total_timesteps, "backend": TrainConfig.backend,
                          "env_workers": TrainConfig.env_workers, "env_threads": "auto", "normalize": None, "use_sde": None,
                          "sde_sample_freq": None, "activation": None, "ortho_init": None, "net_arch": None,
@@ -50,7 +50,7 @@ def test_every_training_command_takes_every_agent_option_from_one_definition():
     # the help is the field's docstring
     assert field_docs(ReservoirSpec)["units"] in commands["evolve"]["units"].help
     assert field_docs(AgentConfig)["observed_units"] in commands["train"]["observed_units"].help
-    assert field_docs(PPOConfig)["learning_rate"] in commands["evolve"]["ppo_lr"].help
+    assert field_docs(PPOConfig)["learning_rate"] in commands["evolve"]["learning_rate"].help
     # the evolution's options that used to be missing
     for flag in ("skip_connection", "bias", "observed_units", "preset"):
         assert flag in commands["evolve"]
@@ -66,9 +66,9 @@ def test_help_still_shows_defaults():
 
 def test_config_file_sets_options_and_flags_override_it(tmp_path):
     toml = tmp_path / "run.toml"
-    toml.write_text('units = 20\nppo-lr = 1e-4\nsr = [0.9]\nskip_connection = true\nenv = "PendulumNoVel-v1"\n')
+    toml.write_text('units = 20\nlearning-rate = 1e-4\nsr = [0.9]\nskip_connection = true\nenv = "PendulumNoVel-v1"\n')
     args = parse(["train", "--config", str(toml), "--units", "30"])
-    assert (args.units, args.ppo_lr, args.sr, args.skip_connection, args.env) == (30, 1e-4, [0.9], True,
+    assert (args.units, args.learning_rate, args.sr, args.skip_connection, args.env) == (30, 1e-4, [0.9], True,
                                                                                    "PendulumNoVel-v1")
     yaml = tmp_path / "run.yaml"
     yaml.write_text("trials: 12\nenv: [CartPoleNoVel-v1, PendulumNoVel-v1]\nnormalization: reference\n")
@@ -99,7 +99,7 @@ def test_ppo_hyperparameters_override_the_preset_and_reach_the_training(tmp_path
                 "clip_range": 0.1, "ent_coef": 0.01, "vf_coef": 0.25, "max_grad_norm": 1.0, "normalize": True,
                 "use_sde": True, "sde_sample_freq": 4}
     for command in ("train", "evolve", "baselines --env CartPole-v1"):
-        ppo = options.ppo_config(parse([*command.split(), *zoo, "--preset", "fast", "--ppo-lr", "1e-3"]))
+        ppo = options.ppo_config(parse([*command.split(), *zoo, "--preset", "fast", "--learning-rate", "1e-3"]))
         assert {k: getattr(ppo, k) for k in expected} == expected and ppo.learning_rate == 1e-3, command
     fast = options.ppo_config(parse(["evolve", "--preset", "fast", "--gamma", "0.9"]))  # the rest stays the preset's
     assert (fast.n_envs, fast.n_steps, fast.n_epochs, fast.gamma, fast.normalize) == (8, 256, 4, 0.9, False)
@@ -184,3 +184,33 @@ def test_an_old_config_file_with_lr_still_sets_the_leak_rate_and_the_new_names_w
     assert parse(["train", "--spectral-radius", "0.7"]).sr == [0.7]
     assert parse(["evolve", "--config", str(old_search)]).min_lr == 0.05
     assert parse(["evolve", "--min-leak-rate", "0.05"]).min_lr == 0.05
+
+
+@pytest.mark.parametrize("command, suffix, text, expected", [
+    ("train", ".toml", "ppo-lr = 1e-4\n", {"learning_rate": 1e-4}),
+    ("evolve", ".yaml", "ppo_lr: 1e-4\n", {"learning_rate": 1e-4}),
+    ("baselines --env CartPole-v1", ".toml", "ppo-lr = 1e-4\n", {"learning_rate": 1e-4}),
+    ("test --study s", ".toml", "ermrl-lr = [3e-4, 1e-4]\nppo-lr = 1e-4\n",
+     {"learning_rates": [3e-4, 1e-4], "baseline_learning_rate": 1e-4}),
+    ("test --study s", ".yaml", "ermrl-lr: 5.0e-5\nppo-lr: 3.0e-4\n",
+     {"learning_rates": [5e-5], "baseline_learning_rate": 3e-4}),
+    ("experiment run partial-observability", ".toml", "test-lrs = [1e-4, 3e-4]\n",
+     {"test_learning_rates": [1e-4, 3e-4]}),
+])
+def test_a_config_file_with_the_learning_rates_old_keys_sets_their_options_of_today(tmp_path, command, suffix, text,
+                                                                                  expected):
+    """A config file written for the flags of older versions (ppo-lr, ermrl-lr, test-lrs) loads: each key sets the
+    option it is now (--learning-rate, --baseline-learning-rate, --test-learning-rates); a flag still overrides it."""
+    path = tmp_path / f"old{suffix}"
+    path.write_text(text)
+    args = parse([*command.split(), "--config", str(path)])
+    assert {k: getattr(args, k) for k in expected} == expected
+    assert not any(hasattr(args, old) for old in ("ppo_lr", "ermrl_lr", "test_lrs"))
+    if command == "train":
+        assert options.ppo_config(args).learning_rate == 1e-4
+        assert parse(["train", "--config", str(path), "--learning-rate", "3e-4"]).learning_rate == 3e-4
+    if command.startswith("test"):
+        from ermrl.experiments.evaluation import TestConfig
+
+        assert options.test_config(args) == TestConfig(learning_rates=tuple(expected["learning_rates"]),
+                                                       baseline_learning_rate=expected["baseline_learning_rate"])

@@ -70,7 +70,7 @@ def test_future_prediction_is_reported_for_k_1_to_5_and_fades(results):
 
 def test_table_and_plot(results, tmp_path):
     table = probe_table(results)
-    assert table.splitlines()[0].startswith("| reservoir | sr | lr | iss | R² v[1] | R² v[3] | R² velocities")
+    assert table.splitlines()[0].startswith("| reservoir | sr | leak rate | iss | R² v[1] | R² v[3] | R² velocities")
     assert "| memoryless | 0.0001 | 1 | 1 |" in table and "R² o(t+5)" in table
     out = plot_probe(results, tmp_path / "probe")
     assert out == tmp_path / "probe.png" and out.read_bytes()[:4] == b"\x89PNG"

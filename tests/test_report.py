@@ -70,8 +70,10 @@ def test_report_contents(tmp_path, k):
     # numbers rounded for reading (4 significant digits): 487.25 -> 487.2
     assert "487.2<" in best_section and "486.2<" in best_section and "488.2<" in best_section
     assert ">17<" in best_section
-    for name, value in best.params.items():
-        assert f"<td>{name}</td>" in best_section and f"{value:.4g}" in best_section
+    for name, value in best.params.items():  # the leak rate spelled out: "lr" reads as a learning rate
+        shown = name.replace("lr", "leak rate", 1)
+        assert f"<td>{shown}</td>" in best_section and f"{value:.4g}" in best_section
+    assert "<td>lr" not in best_section
     # config, with nested train dict flattened
     assert "CartPole-v1" in doc and "train.ppo.n_steps" in doc and "cmaes" in doc
     # failure reasons are escaped
@@ -190,8 +192,10 @@ def test_a_test_phase_section_states_its_result_explains_its_curves_and_hides_ci
 
     src = Path(__file__).resolve().parents[1] / "docs/data/partial-observability-paper/cartpole-1res/test"
     rows = storage.read_test_summary(src)
-    assert result_sentence(rows) == ("ER-MRL lr 0.0003 (sr 0.508, lr 0.0568, iss 1) ends at 371.2 ± 148.0 (final, "
-                                     "mean ± std over 10 seeds), above PPO (same observation)'s 47.4 ± 5.7.")
+    # written before the labels of today, read in today's wording
+    assert result_sentence(rows) == ("ER-MRL (learning rate 0.0003; sr 0.508, leak rate 0.0568, iss 1) ends at "
+                                     "371.2 ± 148.0 (final, mean ± std over 10 seeds), above PPO (same observation)'s "
+                                     "47.4 ± 5.7.")
     html_text = "".join(test_phase_section(src, tmp_path))
     assert "shaded bands ± one standard deviation (population, ddof 0)" in html_text
     assert "[" in html_text.split("P(improvement)")[1]  # 10 seeds: the CI is shown

@@ -71,7 +71,7 @@ def test_dry_run_shows_skip_conditions_values_known_later_and_output_files():
            "runs/pendulum-lr1e-4 --top 5 --seeds 5 --quiet" in lines
     assert "[ -e docs/data/pendulum-lr1e-4/ermrl/summary.json ] || ermrl train --env PendulumNoVel-v1 --units 100 " \
            "'<Φ* of pendulum-lr1e-4 in docs/data/pendulum-lr1e-4/studies.log>' --seeds 10 --first-seed 1000 " \
-           "--timesteps 1000000 --ppo-lr 1e-4 --no-save-agents --quiet --out docs/data/pendulum-lr1e-4/ermrl" in lines
+           "--timesteps 1000000 --learning-rate 1e-4 --no-save-agents --quiet --out docs/data/pendulum-lr1e-4/ermrl" in lines
     assert lines[-1] == "ermrl compare 'Φ* evolved at 1e-4=docs/data/pendulum-lr1e-4/ermrl/summary.json' | tee " \
                         "docs/data/pendulum-lr1e-4/summary.md"
 

@@ -203,9 +203,9 @@ def test_the_test_phase_saves_every_model_agents(tmp_path):
     study.add_trial(create_trial(params={"sr": 0.9, "lr": 0.4}, distributions=dists, value=1.0))
     from ermrl.experiments.evaluation import TestConfig, run_test_phase
 
-    run_test_phase(study, tmp_path, TestConfig(seeds=1, timesteps=2048, ermrl_lrs=(3e-4, 1e-4)))
+    run_test_phase(study, tmp_path, TestConfig(seeds=1, timesteps=2048, learning_rates=(3e-4, 1e-4)))
     found = [p.relative_to(tmp_path).as_posix() for p in agent_files.find_agents(tmp_path)]
-    assert found == ["agents/ermrl-lr-0.0001/seed1000.npz", "agents/ermrl-lr-0.0003/seed1000.npz",
+    assert found == ["agents/ermrl-learning-rate-0.0001/seed1000.npz", "agents/ermrl-learning-rate-0.0003/seed1000.npz",
                      "agents/ppo/seed1000.npz", "agents/ppo-full-observation/seed1000.npz"]
     # one model's folder, as `ermrl analyze fft test/agents/ermrl test/agents/ppo` gives them
     assert agent_files.find_agents(tmp_path / "agents" / "ppo") == [tmp_path / found[2]]

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ermrl import storage
+from ermrl.model_labels import current, number
 from ermrl.analysis import statistics
 from ermrl.analysis.html import img, page, table
 from ermrl.analysis.hp_map import LEAK_RATE_HEADER, draw_hp_map, hp_map_points, leak_rate_rows
@@ -30,10 +31,25 @@ def normalized_test_scores(rows_by_env: dict[str, list[dict]], random_returns: d
             if r["model"] == "PPO (full observation)" or "per_seed" not in r:  # per_seed: summary_schema.TEST_SUMMARY_EXTRA
                 continue
             x = np.array([np.nan if v is None else v for v in r["per_seed"]], float)
-            kind = "PPO" if r.get("kind") == "PPO" else r["model"].split(" (")[0]
-            kinds.setdefault(kind, []).append((x - rnd) / (ppo["final_mean"] - rnd))
+            kinds.setdefault(aggregate_name(r, rows), []).append((x - rnd) / (ppo["final_mean"] - rnd))
     n = min((len(v) for v in kinds.values()), default=0)
     return {k: np.stack(v, axis=1) for k, v in kinds.items() if len(v) == n and n > 0}
+
+
+def aggregate_name(row: dict, rows: list[dict]) -> str:
+    """The model that ``row`` of a test phase (with ``rows``) counts for in the aggregate over envs: "PPO",
+    "PPO-LSTM", "ER-MRL", or with several ER-MRL learning rates in the test phase "ER-MRL (learning rate 0.0003)"."""
+    kind = _kind(row)
+    if kind != "ER-MRL":
+        return kind
+    if sum(_kind(r) == "ER-MRL" for r in rows) > 1 and row.get("learning_rate") is not None:
+        return f"ER-MRL (learning rate {number(row['learning_rate'])})"
+    return "ER-MRL"
+
+
+def _kind(row: dict) -> str:
+    """A row's kind of model ("ER-MRL", "PPO", "PPO-LSTM"), read from its label where it has none."""
+    return row.get("kind") or current(row["model"]).split(" (")[0]
 
 
 def write_experiment_report(experiment, scale, plans, storage_url: str, folder: Path,

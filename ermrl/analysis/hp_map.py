@@ -26,7 +26,7 @@ from ermrl.evolution.study import ATTR
 
 MARKERS = ("o", "^", "s", "D", "v", "P")
 """Reservoir r (0-based) of a trial is drawn with ``MARKERS[r]``."""
-CSV_HEADER = ["study", "envs", "reservoirs", "rank", "trial", "fitness", "reservoir", "sr", "lr"]
+CSV_HEADER = ["study", "envs", "reservoirs", "rank", "trial", "fitness", "reservoir", "sr", "leak_rate"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,8 +95,8 @@ def hp_map_points(studies: list[optuna.Study], top: int = 30) -> list[StudyPoint
     return [study_points(s, top) for s in studies]
 
 
-LEAK_RATE_HEADER = ["study", "envs", "K", "top trials", "median sr", "median lr",
-                    "lr against the other studies of K reservoirs"]
+LEAK_RATE_HEADER = ["study", "envs", "K", "top trials", "median sr", "median leak rate",
+                    "leak rate against the other studies of K reservoirs"]
 
 
 def leak_rate_rows(series: list[StudyPoints]) -> list[list[str]]:
@@ -184,7 +184,7 @@ def draw_hp_map(series: list[StudyPoints], path: Path | str, top: int = 30) -> P
     ax = axes[0, 0]
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_ylabel("leak rate (lr)")
+    ax.set_ylabel("leak rate")
     for name, setter in (("sr", ax.set_xlim), ("lr", ax.set_ylim)):
         setter(min(s.bounds[name][0] for s in series) / 1.2, max(s.bounds[name][1] for s in series) * 1.2)
     fig.tight_layout()

@@ -143,8 +143,9 @@ def as_k(phi: Phi) -> Phi:
 
 
 def phi_text(phi: Phi) -> str:
-    """'sr=0.95 lr=0.5 iss=1' (K = 1) or 'sr=0.95/0.95 lr=0.5/0.05 iss=1/1'."""
-    return " ".join(f"{n}={'/'.join(f'{float(v):.3g}' for v in f)}" for n, f in zip(Phi._fields, as_k(phi)))
+    """'sr=0.95 leak rate=0.5 iss=1' (K = 1) or 'sr=0.95/0.95 leak rate=0.5/0.05 iss=1/1'."""
+    names = ("sr", "leak rate", "iss")  # Phi's fields; in RL, "lr" reads as a learning rate
+    return " ".join(f"{n}={'/'.join(f'{float(v):.3g}' for v in f)}" for n, f in zip(names, as_k(phi)))
 
 
 def reservoir_states(env_id: str, rollouts: Rollouts, phi: Phi, *, units: int = 100, seed: int = 0,
@@ -262,7 +263,7 @@ def probe_table(results: list[ProbeResult]) -> str:
         raise ConfigError("probe_table needs at least one ProbeResult; run probe() first")
     dims = results[0].velocity_dims
     horizon = max(len(r.r2_future) for r in results)
-    head = ["reservoir", "sr", "lr", "iss", *(f"R² v[{d}]" for d in dims), "R² velocities",
+    head = ["reservoir", "sr", "leak rate", "iss", *(f"R² v[{d}]" for d in dims), "R² velocities",
             *(f"R² o(t+{k})" for k in range(1, horizon + 1))]
     rows = []
     for r in results:

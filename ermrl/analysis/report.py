@@ -29,6 +29,7 @@ from ermrl.analysis.html import table as _table
 from ermrl.analysis.plots import learning_curves
 from ermrl.analysis.statistics import format_ci
 from ermrl.errors import ConfigError
+from ermrl.model_labels import param_name
 
 MARKERS = ("o", "^", "s", "D", "v", "P", "*", "X")
 PHI_NAMES = {"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}
@@ -167,7 +168,7 @@ def hp_map(study: optuna.Study, path: Path | str, top: int = 30) -> Path:
             lo, hi = space[name]
             setter(lo / 1.2, hi * 1.2)
     ax.set_xlabel("spectral radius (sr)")
-    ax.set_ylabel("leak rate (lr)")
+    ax.set_ylabel("leak rate")
     ax.set_title("HP map")
     ax.grid(alpha=0.3, which="both")
     return _save(fig, path)
@@ -361,7 +362,7 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
         p = phi(t, k)
         parts += ["<h2>Best &Phi;</h2>",
                   _table(["trial", "fitness", "generation"], [[t.number, t.value, t.user_attrs.get("generation", "")]]),
-                  _table(["param", "value"], [[n, v] for n, v in t.params.items()]),
+                  _table(["param", "value"], [[param_name(n), v] for n, v in t.params.items()]),
                   _table(["reservoir"] + [PHI_NAMES.get(n, n) for n in p], [[r + 1] + [p[n][r] for n in p] for r in range(k)
                                                     if all(len(p[n]) > r for n in p)])]
         seeds = t.user_attrs.get("seed_fitness", [])

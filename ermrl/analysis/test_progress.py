@@ -80,6 +80,8 @@ def table(partial: Path) -> str:
     from ermrl.experiments.evaluation import summarize
     from ermrl.training.results import Results
 
+    from ermrl.model_labels import current
+
     models = kept_models(partial)
     training = in_training(partial)
     if not models and not training:
@@ -90,7 +92,7 @@ def table(partial: Path) -> str:
              "|---|---|---|---|---|---|---|"]
     for job, (identity, parts) in models.items():
         results = parts[0] if len(parts) == 1 else Results.concat(parts)
-        row = summarize(", ".join(identity["labels"]), "", results)
+        row = summarize(", ".join(map(current, identity["labels"])), "", results)  # older labels in today's words
         mean = "—" if row["final_mean"] is None else f"{row['final_mean']:.1f} ± {row['final_std']:.1f}"
         per_seed = ", ".join("—" if v is None else f"{v:.1f}" for v in row["per_seed"])
         seeds = ", ".join(str(int(s)) for s in results.seeds)

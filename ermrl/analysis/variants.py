@@ -24,7 +24,10 @@ from pathlib import Path
 def read_rows(path: Path, auc: bool = True) -> tuple[dict, list[dict]]:
     """(the ER-MRL row, the PPO rows) of a test phase's ``summary.json``, which must have one ER-MRL row; or of an
     ``ermrl train`` run's (one model, no PPO rows; its row holds ``scores``, {seed: final score}, and, if ``auc``,
-    the AUC from the ``curves.csv`` beside it)."""
+    the AUC from the ``curves.csv`` beside it). A model labelled by an older version reads under its label today
+    (:func:`ermrl.model_labels.current`)."""
+    from ermrl.model_labels import current
+
     rows = json.loads(path.read_text())
     if isinstance(rows, dict):
         if "seeds" not in rows or "fitness" not in rows:
@@ -32,6 +35,7 @@ def read_rows(path: Path, auc: bool = True) -> tuple[dict, list[dict]]:
         scores = {int(s): float(f) for s, f in zip(rows["seeds"], rows["fitness"]) if f is not None and f == f}
         return {"model": None, "kind": _run_kind(path), "scores": scores,
                 "auc_early_mean": _early_auc(path) if auc else None}, []
+    rows = [{**r, "model": current(r["model"])} for r in rows]  # as read_curves_csv names them: older labels too
     ermrl = [r for r in rows if r["kind"] == "ER-MRL"]
     if len(ermrl) != 1:
         raise ValueError(f"{path} has {len(ermrl)} ER-MRL rows; give a test phase of one learning rate")

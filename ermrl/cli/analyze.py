@@ -20,12 +20,12 @@ def add_parser(sub, formatter) -> None:
                                    "the reservoir recovers the deleted velocities and predicts o_(t+k).",
                        formatter_class=formatter)
     asub = p.add_subparsers(dest="analyze_command", required=True, metavar="hp-map|probe|context|fft|evaluate")
-    hp = asub.add_parser("hp-map", help="the top trials of several studies on sr × lr (log axes)",
+    hp = asub.add_parser("hp-map", help="the top trials of several studies on sr × leak rate (log axes)",
                          description="Draw the --top best completed trials of each study on spectral radius × leak "
                                      "rate (log axes), one colour per env, circles for 1-reservoir studies and, in a "
                                      "second panel for 2-reservoir studies, circles for reservoir 1 and triangles for "
                                      "reservoir 2 (paper appendix, HP map). The points drawn go to a CSV beside the "
-                                     "figure, and a leak-rate table (each study's median sr and lr, and a "
+                                     "figure, and a leak-rate table (each study's median sr and leak rate, and a "
                                      "Mann–Whitney test of its leak rates against the other studies' of the same K) "
                                      "to a .md beside it, also printed.", formatter_class=formatter)
     hp.add_argument("studies", nargs="+", metavar="STUDY", help="study names, as given to or printed by `ermrl evolve`")
@@ -43,7 +43,8 @@ def add_parser(sub, formatter) -> None:
                                      "episodes of the full env, fit a ridge readout (scikit-learn) on 75%% of the "
                                      "episodes and report R² on the rest: for the deleted velocities and for the "
                                      "kept observation k = 1..5 steps ahead (paper appendix, Results analysis). Rows: "
-                                     "the default Φ (sr 0.95, lr 0.5, iss 1), a memoryless reservoir (sr 1e-4, lr 1), "
+                                     "the default Φ (sr 0.95, leak rate 0.5, iss 1), a memoryless reservoir (sr 1e-4, "
+                                     "leak rate 1), "
                                      "each --phi, and each --study's Φ*.", formatter_class=formatter)
     pr.add_argument("--env", required=True, help="a NoVel env id, e.g. CartPoleNoVel-v1")
     pr.add_argument("--phi", nargs=3, type=float, action="append", default=[], metavar=("SR", "LR", "ISS"),

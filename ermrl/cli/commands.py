@@ -279,7 +279,7 @@ def cmd_test(args) -> int:
     study = load_study(common.storage_url(args), args.study)
     config = study_record.decode_study_record(study.user_attrs[ATTR])
     tested = config.train_for(test.env_id or config.env_ids[0])
-    common.check_memory(tested, test.seeds * max(1, len(test.ermrl_lrs)), "the test phase")
+    common.check_memory(tested, test.seeds * max(1, len(test.learning_rates)), "the test phase")
     out = storage.check_folder(test_dir(common.run_dir(args), study.user_attrs[ATTR], test.env_id))
     progress, close = common.bars(args.quiet)
     models: list = []  # (label, Results) of every model, for TensorBoard
@@ -333,17 +333,17 @@ def cmd_baselines(args) -> int:
     for env_id in args.env:
         common.check_memory(options.train_config(args, env_id, 0), args.seeds, "the PPO baseline")
     ppo = options.ppo_config(args)
-    lr = ppo.learning_rate
+    rate = ppo.learning_rate
     progress, close = common.bars(args.quiet)
     try:  # vanilla PPO trains with every PPO setting given (--gamma, --preset, ...), as the evolution's agents
-        found = baseline_runs.ensure(args.env, args.timesteps, args.seeds, lr, args.table, print, progress,
+        found = baseline_runs.ensure(args.env, args.timesteps, args.seeds, rate, args.table, print, progress,
                                      args.backend, args.env_workers, args.random_episodes, args.recompute,
                                      baselines.ppo_settings(ppo))
     finally:
         close()
     for env_id, b in found.items():
         print(f"{env_id}: random {b.random_return:.4g} per episode ({b.random_step_reward:.4g} per step), "
-              f"PPO {b.ppo:.4g} ({args.seeds} seeds × {args.timesteps:,} steps, lr {lr:g})")
+              f"PPO {b.ppo:.4g} ({args.seeds} seeds × {args.timesteps:,} steps, learning rate {rate:g})")
     print(f"table: {args.table or baselines.default_table()} (over the shipped table {baselines.SHIPPED})")
     return 0
 

@@ -1,6 +1,7 @@
 """``--config FILE.toml`` (or .yaml): default values for any option of a command, keyed by the flag's name
-(``units = 50``, ``ppo-lr = 1e-4``), checked against the command's own options; flags on the command line
-override them."""
+(``units = 50``, ``learning-rate = 1e-4``), checked against the command's own options; flags on the command line
+override them. A key that names a flag of older versions (``ppo-lr``, ``ermrl-lr``, ``test-lrs``) sets the option
+it is now (:func:`ermrl.cli.options.refuse_renamed`), so that config files written for those versions still load."""
 
 from __future__ import annotations
 
@@ -52,12 +53,14 @@ def apply_config_file(parser: argparse.ArgumentParser, path: Path) -> None:
             and a.dest not in ("help", "config", "debug", "version")]
     actions = {a.dest: a for a in kept}  # a key names an option by its value's name (lr) or a flag (leak-rate)
     flags = {o.lstrip("-").replace("-", "_"): a.dest for a in kept for o in a.option_strings}
+    renamed = {o.lstrip("-").replace("-", "_"): a.renamed for a in parser._actions
+               if isinstance(a, Refused) and a.renamed for o in a.option_strings}  # older versions' flags (ppo-lr)
     values = {}
     for key, value in load_config_file(path).items():
         dest = str(key).lstrip("-").replace("-", "_")
-        dest = dest if dest in actions else flags.get(dest, dest)
-        if dest not in actions:
-            names = sorted(d.replace("_", "-") for d in actions)
+        dest = dest if dest in actions else flags.get(dest, renamed.get(dest, dest))
+        if dest not in actions:  # named by their flags: a reader knows --leak-rate, not its value's name (lr)
+            names = sorted(a.option_strings[0].lstrip("-") for a in kept)
             close = difflib.get_close_matches(dest.replace("_", "-"), names, n=1, cutoff=0.75)
             hint = f"did you mean {close[0]!r}?" if close else f"options here: {', '.join(names)}"
             raise ConfigError(f"config file {path}: unknown option {key!r} for `{parser.prog}`; {hint}")

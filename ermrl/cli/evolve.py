@@ -12,8 +12,8 @@ MAX_SAMPLER_SEED = 2**32 - 1
 
 def add_parser(sub, formatter) -> None:
     p = sub.add_parser("evolve", help="evolve reservoir hyperparameters Φ with CMA-ES (the outer loop)",
-                       description="Evolve Φ = (sr, lr, iss) with Optuna. Each generation (popsize trials × seeds) "
-                                   "trains as one population per env. With several --env, a trial's fitness is the "
+                       description="Evolve Φ = (sr, leak rate, iss) with Optuna. Each generation (popsize trials × "
+                                   "seeds) trains as one population per env. With several --env, a trial's fitness is the "
                                    "mean normalized score over the envs (paper §4.3), from the baselines table. "
                                    "Rerunning the same command resumes the study; several processes or machines "
                                    "may work on one study at once, each with its own --worker-index "
@@ -40,6 +40,7 @@ def cmd_evolve(args) -> int:
     from ermrl import storage
     from ermrl.evolution import record as study_record
     from ermrl.cli.progress import EvolutionBar
+    from ermrl.model_labels import param_name
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.evolve import count, estimate_seconds, evolve, make_trainers
     from ermrl.evolution.study import (ATTR, SAMPLERS, check_resumable, check_writable, make_sampler, open_study,
@@ -105,7 +106,7 @@ def cmd_evolve(args) -> int:
         print(stop)
     best = study.best_trial
     print(f"best fitness {best.value:.4g} at trial {best.number}: "
-          + ", ".join(f"{k} {v:.4g}" for k, v in best.params.items()))
+          + ", ".join(f"{param_name(k)} {v:.4g}" for k, v in best.params.items()))
     if config.normalized:
         print("  per env: " + ", ".join(f"{e} {best.user_attrs['env_scores'][e]:.4g} (nScore "
                                          f"{best.user_attrs['env_nscores'][e]:.3g})" for e in env_ids))

@@ -35,9 +35,11 @@ def add_parser(sub, formatter) -> None:
     run.add_argument("--no-estimate", action="store_true", help="do not measure env step costs for the estimate")
     for flag, field, kwargs in (("--test-seeds", "seeds", {"type": int, "metavar": "N"}),
                                 ("--test-timesteps", "timesteps", {"type": int, "metavar": "N"}),
-                                ("--test-lrs", "ermrl_lrs", {"type": float, "nargs": "+", "metavar": "LR"}),
+                                ("--test-learning-rates", "learning_rates",
+                                 {"type": float, "nargs": "+", "metavar": "RATE"}),
                                 ("--test-agents-per-run", "agents_per_run", {"type": int, "metavar": "N"})):
         options.Option(flag, TestBudget, field, kwargs=kwargs).add_to(run)
+    options.refuse_renamed(run, "--test-lrs", "--test-learning-rates", "ER-MRL's learning rates in every test phase")
     options.add_options(run, "env", skip=("--timesteps",))
     options.add_config_option(run)
     run.add_argument("--quiet", action="store_true", help="no progress display")
@@ -85,7 +87,8 @@ def _run(args) -> int:
 
     experiment, scale = registry.get(args.name), registry.get_scale(args.scale)
     budget = runner.TestBudget(args.test_seeds, args.test_timesteps,
-                               None if args.test_lrs is None else tuple(args.test_lrs), args.test_agents_per_run)
+                               None if args.test_learning_rates is None else tuple(args.test_learning_rates),
+                               args.test_agents_per_run)
     names = {s.name for s in experiment.studies}
     unknown = [n for n in args.only if n not in names]
     if unknown:

@@ -3,7 +3,12 @@
 An option names the dataclass field it sets: its help is the field's docstring and its default the field's
 default, so ``ermrl train``, ``evolve``, ``baselines`` and ``experiment run`` share one definition of every
 agent, PPO and search option. ``--config FILE.toml`` (or .yaml) gives defaults for any option of a command,
-keyed by the flag's name (``units = 50``, ``ppo-lr = 1e-4``); flags on the command line override it.
+keyed by the flag's name (``units = 50``, ``learning-rate = 1e-4``); flags on the command line override it.
+
+The learning rate has one name everywhere, SB3's: ``--learning-rate`` (PPO's; in a test phase, the ER-MRL
+agents'), ``--baseline-learning-rate`` (the test phase's PPO baselines'), ``--test-learning-rates`` (`ermrl
+experiment run`'s). The flags of older versions (``--ppo-lr``, ``--ermrl-lr``, ``--test-lrs``) are refused with a
+one-line error naming the new one (:func:`refuse_renamed`); a config file's old keys still set the new options.
 """
 
 from __future__ import annotations
@@ -158,7 +163,7 @@ def _groups() -> dict[str, list[Option]]:
                   Option("--lstm-seq-len", PPOConfig, "lstm_seq_len", kwargs={"type": int})],
         "ppo": [Option("--preset", help="PPO settings: 'sb3' = stable-baselines3's defaults (the paper); "
                                         "'fast' = 8 envs, 4 epochs.", default="sb3", kwargs={"choices": ["sb3", "fast"]}),
-                Option("--ppo-lr", PPOConfig, "learning_rate", help="Default: the preset's (3e-4).",
+                Option("--learning-rate", PPOConfig, "learning_rate", help="Default: the preset's (3e-4).",
                        kwargs={"type": float, "default": None}),
                 *(Option(f"--{name.replace('_', '-')}", PPOConfig, name,
                          help=f"Default: the preset's ({getattr(PPOConfig(), name)} in sb3).",
@@ -197,8 +202,10 @@ def _groups() -> dict[str, list[Option]]:
             Option("--converged-generations", Convergence, "generations", kwargs={"type": int, "metavar": "G"})],
         "test": [Option("--seeds", TestConfig, "seeds", kwargs={"type": int}),
                  Option("--timesteps", TestConfig, "timesteps", kwargs={"type": int}),
-                 Option("--ermrl-lr", TestConfig, "ermrl_lrs", kwargs={"type": float, "nargs": "+", "default": None}),
-                 Option("--ppo-lr", TestConfig, "ppo_lr", kwargs={"type": float}),
+                 Option("--learning-rate", TestConfig, "learning_rates", name="learning_rates",
+                        kwargs={"type": float, "nargs": "+", "default": None, "metavar": "RATE"}),
+                 Option("--baseline-learning-rate", TestConfig, "baseline_learning_rate",
+                        kwargs={"type": float, "metavar": "RATE"}),
                  Option("--env", TestConfig, "env_id", kwargs={}),
                  Option("--trial", TestConfig, "trial", kwargs={"type": int}),
                  Option("--auc-steps", TestConfig, "auc_steps", kwargs={"type": int}),
@@ -224,31 +231,41 @@ def _groups() -> dict[str, list[Option]]:
 PPO_FIELDS = {"n_envs": int, "n_steps": int, "batch_size": int, "n_epochs": int, "gamma": float, "gae_lambda": float,
               "clip_range": float, "ent_coef": float, "vf_coef": float, "max_grad_norm": float}
 """The PPOConfig fields that have a flag of their own (``--gamma``, ``--n-steps``, ...), named as SB3's arguments;
-each overrides the preset's value, as ``--ppo-lr`` does (e.g. rl-baselines3-zoo's tuned settings for an env)."""
+each overrides the preset's value, as ``--learning-rate`` does (e.g. rl-baselines3-zoo's tuned settings for an env)."""
 
 PPO_SWITCHES = ("normalize", "use_sde", "sde_sample_freq", "activation", "ortho_init")
 """The PPOConfig fields beyond SB3's PPO defaults that rl-baselines3-zoo's settings use, with flags of their own
 (the policy's widths too: ``--net-arch``, PPOConfig.hidden)."""
 
 AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connectivity", "bias_scaling", "feed_action",
-               "skip_connection", "observed_units", "preset", "ppo_lr", *PPO_FIELDS, *PPO_SWITCHES, "net_arch",
+               "skip_connection", "observed_units", "preset", "learning_rate", *PPO_FIELDS, *PPO_SWITCHES, "net_arch",
                "timesteps", "backend", "env_workers", "env_threads")
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
 
 PHI_NAMES = {"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}
 FLAG_NAMES = {"lr": "leak-rate"}
-"""Φ's flags spell out the leak rate: in RL, "lr" is a learning rate (PPO's is ``--ppo-lr``)."""
-LEAK_RATE_NOT_LR = ("{flag} is ambiguous: the reservoir's leak rate is {leak}, PPO's learning rate is --ppo-lr "
-                    "(ER-MRL's in a test phase: --ermrl-lr)")
+"""Φ's flags spell out the leak rate: in RL, "lr" is a learning rate (PPO's is ``--learning-rate``)."""
+LEAK_RATE_NOT_LR = ("{flag} is ambiguous: the reservoir's leak rate is {leak}, PPO's learning rate is "
+                    "--learning-rate (in a test phase, the PPO baselines': --baseline-learning-rate)")
+RENAMED = "{old} is now {new} ({meaning})"
+"""The one-line error of a flag that older versions named otherwise."""
+RENAMED_FLAGS = {
+    "ppo": [("--ppo-lr", "--learning-rate", "PPO's learning rate")],
+    "test": [("--ermrl-lr", "--learning-rate", "the ER-MRL agents' learning rates"),
+             ("--ppo-lr", "--baseline-learning-rate", "the PPO baselines' learning rate")],
+}
+"""{option group: [(old flag, its flag now, what it sets)]}: the flags each group refuses under their old names."""
 
 
 class Refused(argparse.Action):
-    """A flag that is refused with ``message`` (a one-line error), whatever values follow it; not in --help."""
+    """A flag that is refused with ``message`` (a one-line error), whatever values follow it; not in --help.
+    ``renamed``: the dest of the option that it is now, which a config file's key of the old name sets."""
 
-    def __init__(self, option_strings, dest, message: str = "", **kwargs):
+    def __init__(self, option_strings, dest, message: str = "", renamed: str | None = None, **kwargs):
         super().__init__(option_strings, dest, nargs="*", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
         self.message = message
+        self.renamed = renamed
 
     def __call__(self, parser, namespace, values, option_string=None):
         parser.error(self.message)
@@ -256,8 +273,20 @@ class Refused(argparse.Action):
 
 def refuse_lr(parser: argparse.ArgumentParser, flag: str, leak: str) -> None:
     """Refuses ``flag`` (``--lr``, ``--min-lr``, ...) with the one-line error naming both of its meanings."""
-    parser.add_argument(flag, action=Refused, dest=f"refused_{flag.lstrip('-').replace('-', '_')}",
+    parser.add_argument(flag, action=Refused, dest=_refused_dest(flag),
                         message=LEAK_RATE_NOT_LR.format(flag=flag, leak=leak))
+
+
+def refuse_renamed(parser: argparse.ArgumentParser, old: str, new: str, meaning: str) -> None:
+    """Refuses ``old``, the flag that older versions named ``new`` (an option of ``parser``), with the one-line
+    error naming ``new`` and ``meaning`` (what it sets); a config file's key ``old`` sets ``new``."""
+    (dest,) = [a.dest for a in parser._actions if new in a.option_strings]
+    parser.add_argument(old, action=Refused, dest=_refused_dest(old), renamed=dest,
+                        message=RENAMED.format(old=old, new=new, meaning=meaning))
+
+
+def _refused_dest(flag: str) -> str:
+    return f"refused_{flag.lstrip('-').replace('-', '_')}"
 
 
 def add_options(parser: argparse.ArgumentParser, *groups: str, skip: tuple[str, ...] = ()) -> None:
@@ -266,6 +295,9 @@ def add_options(parser: argparse.ArgumentParser, *groups: str, skip: tuple[str, 
         for option in table[group]:
             if option.flag not in skip:
                 option.add_to(parser)
+        for old, new, meaning in RENAMED_FLAGS.get(group, ()):
+            if new not in skip:
+                refuse_renamed(parser, old, new, meaning)
         if group == "search":
             refuse_lr(parser, "--min-lr", "--min-leak-rate")
             refuse_lr(parser, "--max-lr", "--max-leak-rate")
@@ -313,8 +345,8 @@ def ppo_config(args):
     if getattr(args, "model", "ff") == "lstm":  # the "model" options exist on `ermrl train` only
         changes.update(model="lstm", lstm_hidden_size=args.lstm_hidden, lstm_seq_len=args.lstm_seq_len)
     changes.update({name: getattr(args, name) for name in PPO_FIELDS if getattr(args, name, None) is not None})
-    if args.ppo_lr is not None:
-        changes["learning_rate"] = args.ppo_lr
+    if args.learning_rate is not None:
+        changes["learning_rate"] = args.learning_rate
     changes.update({name: getattr(args, name) for name in PPO_SWITCHES if getattr(args, name, None) is not None})
     if getattr(args, "net_arch", None) is not None:
         changes["hidden"] = tuple(args.net_arch)
@@ -351,9 +383,9 @@ def search_space(args):
 def test_config(args):
     from ermrl.experiments.evaluation import TestConfig
 
-    return TestConfig(seeds=args.seeds, timesteps=args.timesteps, ermrl_lrs=tuple(args.ermrl_lr or ()),
-                      ppo_lr=args.ppo_lr, env_id=args.env, trial=args.trial, auc_steps=args.auc_steps,
-                      recurrent_baseline=args.recurrent_baseline)
+    return TestConfig(seeds=args.seeds, timesteps=args.timesteps, learning_rates=tuple(args.learning_rates or ()),
+                      baseline_learning_rate=args.baseline_learning_rate, env_id=args.env, trial=args.trial,
+                      auc_steps=args.auc_steps, recurrent_baseline=args.recurrent_baseline)
 
 
 def effective(args) -> dict:

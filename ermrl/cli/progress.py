@@ -14,6 +14,7 @@ import time
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+from ermrl.model_labels import param_name
 from ermrl.training import Progress as TrainProgress
 
 LINE_INTERVAL_S = 10.0
@@ -123,7 +124,7 @@ class EvolutionBar:
 
     def update(self, p) -> None:
         best = "none yet" if p.best_value is None else f"{p.best_value:.1f} (" + ", ".join(
-            f"{k.replace('lr', 'leak rate', 1) if k.startswith('lr') else k} {v:.3g}" for k, v in p.best_params.items()) + ")"
+            f"{param_name(k)} {v:.3g}" for k, v in p.best_params.items()) + ")"
         desc = f"gen {p.generation} | {p.completed}/{p.trials} trials | best {best}"
         if self.n_envs > 1 and p.train is not None:
             desc += f" | {p.env_id}"

@@ -55,11 +55,12 @@ def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path
             changed = True
         if recompute or table.ppo(env_id, timesteps, seeds, learning_rate, settings) is None:
             shown = "".join(f", {k} {v}" for k, v in settings.items())
-            log(f"baselines: vanilla PPO on {env_id} ({seeds} seeds × {timesteps:,} steps, lr {learning_rate:g}{shown})")
+            log(f"baselines: vanilla PPO on {env_id} ({seeds} seeds × {timesteps:,} steps, learning rate "
+                f"{learning_rate:g}{shown})")
             fn = progress(f"PPO baseline {env_id}") if progress else None
             p = bl.ppo_fitness(env_id, timesteps, seeds, learning_rate, backend, env_workers, fn, settings)
             table.add_ppo(env_id, p, _command(["baselines", "--env", env_id, "--timesteps", str(timesteps),
-                                               "--seeds", str(seeds), "--ppo-lr", f"{learning_rate:g}",
+                                               "--seeds", str(seeds), "--learning-rate", f"{learning_rate:g}",
                                                *_flags(settings)]))
             changed = True
         if changed:

@@ -20,6 +20,7 @@ import json
 import re
 import shutil
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -49,15 +50,17 @@ def plain(obj):
     return json.loads(json.dumps(obj, default=storage._json_default))
 
 
-def open_partial(out: Path, settings: dict) -> tuple[Path, bool]:
+def open_partial(out: Path, settings: dict, recorded: Callable[[object], object] = lambda s: s) -> tuple[Path, bool]:
     """The partial folder of ``out`` for ``settings`` (JSON-ready), created if needed. Returns (folder,
-    discarded): ``discarded`` is True when a folder made for other settings was there and has been emptied."""
+    discarded): ``discarded`` is True when a folder made for other settings was there and has been emptied.
+    ``recorded`` reads the settings the folder holds as they read today (older versions named some keys
+    otherwise)."""
     folder = partial_dir(out)
     path = folder / SETTINGS
     discarded = False
     if folder.exists():
         try:
-            same = storage.read_json(path) == plain(settings)
+            same = recorded(storage.read_json(path)) == plain(settings)
         except (OSError, ValueError):  # missing or damaged: nothing in it can be trusted
             same = False
         if same:

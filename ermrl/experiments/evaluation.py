@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 import optuna
 
-from ermrl import agent_files, envs, provenance, storage
+from ermrl import agent_files, envs, model_labels, provenance, storage
 from ermrl.agent import AgentConfig, Phi
 from ermrl.analysis import statistics
 from ermrl.envs import masking
@@ -49,10 +49,10 @@ class TestConfig:
     """New seeds per model (the paper: 10)."""
     timesteps: int = 1_000_000
     """Env steps per agent (the paper: 1M, 3M for LunarLander)."""
-    ermrl_lrs: tuple[float, ...] = ()
-    """PPO learning rates of the ER-MRL model, one model each (the reference tested 3e-4, 1e-4 and 5e-5);
+    learning_rates: tuple[float, ...] = ()
+    """PPO learning rates of the ER-MRL agents, one model each (the reference tested 3e-4, 1e-4 and 5e-5);
     empty: the evolution's."""
-    ppo_lr: float | None = None
+    baseline_learning_rate: float | None = None
     """Learning rate of the PPO baselines (the reference: 3e-4); None: the evolution's."""
     env_id: str | None = None
     """Env to test on; None: the evolution's (first) env. Another env tests generalization."""
@@ -70,15 +70,27 @@ class TestConfig:
             raise ConfigError(f"--seeds must be in 1..{MAX_TEST_SEEDS:,} (the paper tests on 10), got {self.seeds}")
         if self.timesteps < 1:
             raise ConfigError(f"--timesteps must be >= 1, got {self.timesteps}")
-        for lr in self.ermrl_lrs + ((self.ppo_lr,) if self.ppo_lr is not None else ()):
-            if not 0 < lr < 1:
-                raise ConfigError(f"learning rate {lr} is outside (0, 1); the paper uses 3e-4 or 1e-4")
+        baseline = () if self.baseline_learning_rate is None else (self.baseline_learning_rate,)
+        for rate in self.learning_rates + baseline:
+            if not 0 < rate < 1:
+                raise ConfigError(f"learning rate {rate} is outside (0, 1); the paper uses 3e-4 or 1e-4")
         if self.trial is not None and self.trial < 0:
             raise ConfigError(f"--trial must be a trial number >= 0, got {self.trial}")
         if self.auc_steps is not None and self.auc_steps < 1:
             raise ConfigError(f"--auc-steps must be >= 1, got {self.auc_steps}")
         if self.env_id is not None and not self.env_id.strip():
             raise ConfigError("--env is empty; give an env id, or leave --env out to test on the evolution's env")
+
+
+RENAMED_FIELDS = {"ermrl_lrs": "learning_rates", "ppo_lr": "baseline_learning_rate"}
+"""TestConfig's fields under the names that older versions recorded them with (test_config.json, the settings of
+an unfinished test phase): {old name: current name}."""
+
+
+def recorded_test(saved: dict) -> dict:
+    """A TestConfig as recorded (test_config.json, an unfinished test phase's settings), by older versions too:
+    its fields under their current names (:data:`RENAMED_FIELDS`), the other keys as they are."""
+    return {RENAMED_FIELDS.get(k, k): v for k, v in saved.items()}
 
 
 def test_dir(run_dir: Path, record: dict, env_id: str | None) -> Path:
@@ -115,12 +127,6 @@ def _nanstat(fn, x) -> float | None:
     return float(fn(x)) if np.isfinite(x).any() else None
 
 
-def _phi_text(phi: Phi, k: int, trial: int) -> str:
-    if k != 1:
-        return f"trial {trial}"
-    return ", ".join(f"{n} {float(v[0]):.3g}" for n, v in zip(("sr", "lr", "iss"), phi))
-
-
 def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
                    progress: Callable[[str], Callable] | None = None, save_agents: bool = True,
                    log: Callable[[str], None] | None = None,
@@ -130,9 +136,10 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
     into ``out`` (checked before any training, written all at once at the end: :func:`ermrl.storage.staged_folder`),
     and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
-    ermrl, ermrl-lr-LR with several learning rates, ppo, ppo-full-observation, ppo-lstm). Returns one summary row
-    per model (see :func:`summarize`), each ER-MRL row with its probability of improvement over every PPO baseline
-    (PPO-LSTM included).
+    ermrl, ermrl-learning-rate-RATE with several learning rates, ppo, ppo-full-observation, ppo-lstm). Returns one
+    summary row per model (see :func:`summarize`), each ER-MRL row with its probability of improvement over every
+    PPO baseline (PPO-LSTM included). An ER-MRL model's label names its learning rate and Φ
+    (:mod:`ermrl.model_labels`).
 
     Each trained model is kept in ``out.partial/`` until ``out`` is written (:mod:`ermrl.experiments.checkpoints`):
     a rerun after a stop loads the models finished for the same settings and Φ* instead of training them again,
@@ -160,40 +167,43 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     ``test.seeds`` agents), e.g. to write TensorBoard logs of its learning curves and PPO diagnostics."""
     config = study_record.decode_study_record(study.user_attrs[ATTR])
     trial, phi, how = chosen_trial(study, config, test.trial)
-    base, seeds, ppo_lr = _settings(config, test)
+    base, seeds, baseline_rate = _settings(config, test)
     envs.describe(base.env_id, config.train.backend)  # an unknown id fails before any training
     storage.check_folder(storage.check_rerun_folder(out, "test"))
     if env_workers is not None:
         base = dataclasses.replace(base, env_workers=env_workers)
     k = config.space.reservoirs
-    ermrl_lrs = test.ermrl_lrs or (config.train.ppo.learning_rate,)
-    baselines = baseline_jobs(base, seeds, ppo_lr, test.recurrent_baseline)
+    rates = test.learning_rates or (config.train.ppo.learning_rate,)
+    baselines = baseline_jobs(base, seeds, baseline_rate, test.recurrent_baseline)
     for _, _, train_config, _, _ in baselines:
         if train_config.ppo.model == "lstm":  # checked before any training: JAX envs only
             recurrent.check(train_config)
 
-    phi_text = _phi_text(phi, k, trial.number)
-    labels = [f"ER-MRL ({phi_text})" if len(ermrl_lrs) == 1 else f"ER-MRL lr {lr:g} ({phi_text})" for lr in ermrl_lrs]
-    jobs = [("ER-MRL", base, Population.grid(phi, seeds, list(ermrl_lrs), k), labels)]
-    folders = {label: "ermrl" if len(ermrl_lrs) == 1 else f"ermrl-lr-{lr:g}" for label, lr in zip(labels, ermrl_lrs)}
-    for kind, folder, train_config, population, model_labels in baselines:
-        jobs.append((kind, train_config, population, model_labels))
-        folders[model_labels[0]] = folder
+    labels = [model_labels.ermrl_label(rate, model_labels.phi_text(phi, k, trial.number)) for rate in rates]
+    older = {labels[0]: model_labels.older_ermrl_labels(phi, k, trial.number, rates)}  # what older versions kept
+    jobs = [("ER-MRL", base, Population.grid(phi, seeds, list(rates), k), labels)]
+    folders = {label: "ermrl" if len(rates) == 1 else model_labels.ermrl_folder(rate)
+               for label, rate in zip(labels, rates)}
+    for kind, folder, train_config, population, baseline_labels in baselines:
+        jobs.append((kind, train_config, population, baseline_labels))
+        folders[baseline_labels[0]] = folder
 
     if agents_per_run is not None and agents_per_run < 1:
         raise ConfigError(f"--agents-per-run must be >= 1, got {agents_per_run}")
     if baseline_store is not None:
         storage.check_folder(baseline_store, "--baseline-store")
-    partial, discarded = checkpoints.open_partial(out, {"test": storage.to_dict(test), "phi_trial": trial.number})
+    partial, discarded = checkpoints.open_partial(out, {"test": storage.to_dict(test), "phi_trial": trial.number},
+                                                  _recorded_settings)
     if discarded and log:
         log(f"discarded the models of an unfinished test phase with other settings ({partial})")
     curves, seed_map, rows, agents = {}, {}, [], []
-    for kind, train_config, population, model_labels in jobs:
-        name = folders[model_labels[0]] if len(model_labels) == 1 else "ermrl"
-        shown = model_labels[0] if len(model_labels) == 1 else kind
-        results = _trained(partial, name, model_labels, train_config, population, agents_per_run, shown,
-                           progress, log, snapshot_every_s, baseline_store if kind != "ER-MRL" else None)
-        for m, label in enumerate(model_labels):
+    for kind, train_config, population, labels_of_job in jobs:
+        name = folders[labels_of_job[0]] if len(labels_of_job) == 1 else "ermrl"
+        shown = labels_of_job[0] if len(labels_of_job) == 1 else kind
+        results = _trained(partial, name, labels_of_job, train_config, population, agents_per_run, shown,
+                           progress, log, snapshot_every_s, baseline_store if kind != "ER-MRL" else None,
+                           older.get(labels_of_job[0]))
+        for m, label in enumerate(labels_of_job):
             part = results.select(np.arange(m * len(seeds), (m + 1) * len(seeds)))
             curves[label] = part.curves()
             seed_map[label] = part.seeds
@@ -225,26 +235,36 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     return rows
 
 
+def _recorded_settings(settings):
+    """An unfinished test phase's settings as recorded, by older versions too: its TestConfig's fields under their
+    current names (:func:`recorded_test`)."""
+    if isinstance(settings, dict) and isinstance(settings.get("test"), dict):
+        return {**settings, "test": recorded_test(settings["test"])}
+    return settings
+
+
 def _settings(config, test: TestConfig) -> tuple:
-    """(the ER-MRL model's TrainConfig on the tested env at the test's budget, the test seeds, PPO's learning rate)."""
+    """(the ER-MRL model's TrainConfig on the tested env at the test's budget, the test seeds, the PPO baselines'
+    learning rate)."""
     env_id = test.env_id or config.env_ids[0]
     base = dataclasses.replace(config.train_for(env_id), total_timesteps=test.timesteps)
     seeds = list(range(FIRST_TEST_SEED, FIRST_TEST_SEED + test.seeds))
-    return base, seeds, config.train.ppo.learning_rate if test.ppo_lr is None else test.ppo_lr
+    rate = test.baseline_learning_rate
+    return base, seeds, config.train.ppo.learning_rate if rate is None else rate
 
 
-def baseline_jobs(base, seeds: list[int], ppo_lr: float, recurrent_baseline: bool = False) -> list[tuple]:
+def baseline_jobs(base, seeds: list[int], learning_rate: float, recurrent_baseline: bool = False) -> list[tuple]:
     """The PPO baselines of a test phase whose ER-MRL model trains with ``base`` (a TrainConfig on the tested env),
     as (kind, folder, TrainConfig, Population, [label]) each: PPO on the same observation, on the full one (masked
-    envs), and PPO-LSTM if asked; ``seeds`` agents each at learning rate ``ppo_lr``. Their agent is plain PPO,
+    envs), and PPO-LSTM if asked; ``seeds`` agents each at ``learning_rate``. Their agent is plain PPO,
     ``AgentConfig(reservoirs=0)``, whatever ``base``'s reservoirs (units, observed units, fed action: unused
-    without a reservoir), and their PPO config holds ``ppo_lr``, the rate they train at, not the evolution's (the
-    trainer steps at the population's rate), so that test phases of reservoirs of any size, evolved at any rate,
-    share their baselines in a store."""
+    without a reservoir), and their PPO config holds ``learning_rate``, the rate they train at, not the
+    evolution's (the trainer steps at the population's rate), so that test phases of reservoirs of any size,
+    evolved at any rate, share their baselines in a store."""
     base_id, deleted = masking.parse(base.env_id)
     plain = dataclasses.replace(base, agent=AgentConfig(reservoirs=0),
-                                ppo=dataclasses.replace(base.ppo, learning_rate=ppo_lr))
-    grid = Population.grid(Phi(1.0, 1.0, 1.0), seeds, ppo_lr, 0)
+                                ppo=dataclasses.replace(base.ppo, learning_rate=learning_rate))
+    grid = Population.grid(Phi(1.0, 1.0, 1.0), seeds, learning_rate, 0)
     jobs = [("PPO", "ppo", plain, grid, ["PPO (same observation)"])]
     if deleted:
         jobs.append(("PPO", "ppo-full-observation", dataclasses.replace(plain, env_id=base_id), grid,
@@ -258,9 +278,9 @@ def baseline_jobs(base, seeds: list[int], ppo_lr: float, recurrent_baseline: boo
 def baseline_files(config, test: TestConfig, store: Path, agents_per_run: int | None = None) -> list[Path]:
     """Where ``store`` keeps (or will keep) the PPO baselines of ``test`` for a study evolved with ``config`` (an
     EvolveConfig), one path per baseline: what the time estimate of `ermrl experiment run` checks."""
-    base, seeds, ppo_lr = _settings(config, test)
+    base, seeds, rate = _settings(config, test)
     paths = []
-    for _, folder, train_config, population, labels in baseline_jobs(base, seeds, ppo_lr, test.recurrent_baseline):
+    for _, folder, train_config, population, labels in baseline_jobs(base, seeds, rate, test.recurrent_baseline):
         n = population.size
         size = n if agents_per_run is None else min(agents_per_run, n)
         identity = _shared_identity(_job_identity(folder, labels, train_config, population), size, n)
@@ -270,14 +290,15 @@ def baseline_files(config, test: TestConfig, store: Path, agents_per_run: int | 
 
 def _trained(partial: Path, name: str, labels: list[str], train_config, population: Population,
              agents_per_run: int | None, shown: str, progress, log, snapshot_every_s: float,
-             store: Path | None = None) -> Results:
+             store: Path | None = None, older: list[str] | None = None) -> Results:
     """The results of one model (a job): kept from ``partial`` when an earlier run finished it, whole or in
-    groups of agents, or from ``store`` (a baseline store, None for ER-MRL), else trained (in groups of
-    ``agents_per_run``) and kept in ``partial`` group by group, then whole in ``store``."""
+    groups of agents (under ``labels``, or ``older``: the labels an older version gave it), or from ``store`` (a
+    baseline store, None for ER-MRL), else trained (in groups of ``agents_per_run``) and kept in ``partial`` group
+    by group, then whole in ``store``."""
     n = population.size
     size = n if agents_per_run is None else min(agents_per_run, n)
     identity = _job_identity(name, labels, train_config, population)
-    whole = checkpoints.load_job(partial, name, identity)  # kept whole: trained as one group
+    whole = _kept(partial, name, name, labels, older, train_config, population)  # kept whole: trained as one group
     if whole is not None:
         if log:
             log(f"kept {', '.join(labels)} from an earlier run ({partial / name}.npz)")
@@ -293,10 +314,21 @@ def _trained(partial: Path, name: str, labels: list[str], train_config, populati
             return whole
     if whole is None:
         whole = _train(partial, name, labels, train_config, population, size, shown, progress, log,
-                       snapshot_every_s)
+                       snapshot_every_s, older)
     if store is not None:
         baseline_models.save(store, _shared_identity(identity, size, n), whole)
     return whole
+
+
+def _kept(partial: Path, file: str, name: str, labels: list[str], older: list[str] | None, train_config,
+          population: Population) -> Results | None:
+    """The results that ``partial`` keeps as ``file`` for the job ``name`` with ``labels``, or with ``older`` (the
+    labels an older version gave the same job); None when it keeps none."""
+    for shown in (labels, older) if older else (labels,):
+        found = checkpoints.load_job(partial, file, _job_identity(name, shown, train_config, population))
+        if found is not None:
+            return found
+    return None
 
 
 def _shared_identity(identity: dict, size: int, n: int) -> dict:
@@ -305,9 +337,9 @@ def _shared_identity(identity: dict, size: int, n: int) -> dict:
 
 
 def _train(partial: Path, name: str, labels: list[str], train_config, population: Population, size: int,
-           shown: str, progress, log, snapshot_every_s: float) -> Results:
+           shown: str, progress, log, snapshot_every_s: float, older: list[str] | None = None) -> Results:
     """Trains one model in groups of ``size`` agents, keeping each group in ``partial`` as it finishes (and
-    loading the groups an earlier run kept)."""
+    loading the groups an earlier run kept, under ``labels`` or ``older``)."""
     n = population.size
     trainer, parts = None, []
     for lo in range(0, n, size):
@@ -318,7 +350,8 @@ def _train(partial: Path, name: str, labels: list[str], train_config, population
         part_name = name if size == n else f"{name}.agents-{lo}-{hi - 1}"
         group = "" if size == n else f", agents {lo + 1}–{hi} of {n}" if hi - lo > 1 else f", agent {hi} of {n}"
         identity = _job_identity(name, labels, train_config, part)
-        results = None if size == n else checkpoints.load_job(partial, part_name, identity)  # whole: looked above
+        # the whole model was looked for above
+        results = None if size == n else _kept(partial, part_name, name, labels, older, train_config, part)
         if results is not None:
             if log:
                 log(f"kept {shown}{group} from an earlier run ({partial / part_name}.npz)")

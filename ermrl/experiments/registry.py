@@ -17,7 +17,7 @@ from ermrl.evolution.convergence import Convergence
 NOVEL = ("CartPoleNoVel-v1", "PendulumNoVel-v1", "LunarLanderNoVel-v3")
 LOCOMOTION = ("Ant-v5", "HalfCheetah-v5", "Swimmer-v5", "Hopper-v5", "Walker2d-v5", "Humanoid-v5", "HumanoidStandup-v5")
 MORPHOLOGIES = ("Ant-v5", "HalfCheetah-v5", "Swimmer-v5")
-REFERENCE_TEST_LRS = (3e-4, 1e-4, 5e-5)
+REFERENCE_TEST_LEARNING_RATES = (3e-4, 1e-4, 5e-5)
 """The learning rates at which the reference code tested ER-MRL (PPO: 3e-4)."""
 
 
@@ -34,13 +34,13 @@ class StudySpec:
     observed_units: int | None = None
     fixed_iss: float | None = None
     """Input scaling held fixed (the partially observable tasks: 1.0), or None to evolve it."""
-    evolve_lr: float = 3e-4
+    evolve_learning_rate: float = 3e-4
     """PPO learning rate during the evolution (the paper: 3e-4)."""
     test_envs: tuple[str, ...] = ()
     """Envs of the test phases; empty: the evolution's env (one env only)."""
-    ermrl_lrs: tuple[float, ...] = (3e-4,)
+    learning_rates: tuple[float, ...] = (3e-4,)
     """ER-MRL's learning rates in the test phase, one model each."""
-    ppo_lr: float = 3e-4
+    baseline_learning_rate: float = 3e-4
     """The PPO baselines' learning rate in the test phase."""
     long_test: bool = False
     """Test at the scale's long budget (LunarLander: 3M steps at the paper's scale)."""
@@ -63,7 +63,7 @@ class Experiment:
     """Claims of shared/paper/claims.md it checks (C1..C17)."""
     studies: tuple[StudySpec, ...]
     hp_map: bool = False
-    """Draw the cross-study HP map (top 30 Φ of each study on sr × lr)."""
+    """Draw the cross-study HP map (top 30 Φ of each study on sr × leak rate)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,8 +123,9 @@ def _short(env_id: str) -> str:
 
 def _po() -> tuple[StudySpec, ...]:
     # paper App. "PPO hyperparameters": 1e-4 on partially observable tasks; the reference tested several
-    return tuple(StudySpec(f"{_short(e)}-{k}res", (e,), reservoirs=k, fixed_iss=1.0, ermrl_lrs=REFERENCE_TEST_LRS,
-                           ppo_lr=3e-4, long_test=e.startswith("LunarLander"))
+    return tuple(StudySpec(f"{_short(e)}-{k}res", (e,), reservoirs=k, fixed_iss=1.0,
+                           learning_rates=REFERENCE_TEST_LEARNING_RATES, baseline_learning_rate=3e-4,
+                           long_test=e.startswith("LunarLander"))
                  for e in NOVEL for k in (1, 2))
 
 
@@ -154,21 +155,21 @@ EXPERIMENTS = {e.name: e for e in (
                "other", "§4.3.2, Fig. humanoids", ("C12",),
                (StudySpec("humanoid-to-standup", ("Humanoid-v5",), reservoirs=2, test_envs=("HumanoidStandup-v5",)),
                 StudySpec("standup-to-humanoid", ("HumanoidStandup-v5",), reservoirs=2, test_envs=("Humanoid-v5",)))),
-    Experiment("hp-map", "Where the best Φ lie: the top 30 trials of every locomotion study on sr × lr",
+    Experiment("hp-map", "Where the best Φ lie: the top 30 trials of every locomotion study on sr × leak rate",
                "App. Reservoir hyperparameters analysis, Fig. HP map", ("C11",),
                tuple(StudySpec(f"{_short(e)}-{k}res", (e,), reservoirs=k) for e in LOCOMOTION[:5] for k in (1, 2)),
                hp_map=True),
     Experiment("reservoir-sizes", "Reservoir size: 25 to 1000 units on the partially observable tasks, 100 and 1000 "
                "on the humanoid", "App. Additional experiments", ("C14",),
-               tuple(StudySpec(f"{_short(e)}-{n}u", (e,), units=n, fixed_iss=1.0, ermrl_lrs=(1e-4,))
+               tuple(StudySpec(f"{_short(e)}-{n}u", (e,), units=n, fixed_iss=1.0, learning_rates=(1e-4,))
                      for e in NOVEL[:2] for n in (25, 50, 100, 200, 500, 1000))
                + tuple(StudySpec(f"humanoid-{n}u", ("Humanoid-v5",), units=n) for n in (100, 1000))),
     Experiment("observed-units", "Partially observed reservoirs on CartPoleNoVel: 100 of 100, 1000 of 1000, "
                "100 of 1000 units", "App. Additional experiments", ("C15",),
-               (StudySpec("100-of-100", ("CartPoleNoVel-v1",), units=100, fixed_iss=1.0, ermrl_lrs=(1e-4,)),
-                StudySpec("1000-of-1000", ("CartPoleNoVel-v1",), units=1000, fixed_iss=1.0, ermrl_lrs=(1e-4,)),
+               (StudySpec("100-of-100", ("CartPoleNoVel-v1",), units=100, fixed_iss=1.0, learning_rates=(1e-4,)),
+                StudySpec("1000-of-1000", ("CartPoleNoVel-v1",), units=1000, fixed_iss=1.0, learning_rates=(1e-4,)),
                 StudySpec("100-of-1000", ("CartPoleNoVel-v1",), units=1000, observed_units=100, fixed_iss=1.0,
-                          ermrl_lrs=(1e-4,)))),
+                          learning_rates=(1e-4,)))),
     Experiment("reservoir-count", "K = 1, 2, 3 reservoirs in the generalization groups", "App. Additional experiments",
                ("C16",), tuple(s for k in (1, 2, 3) for s in _generalization(k, f"-{k}res"))),
 )}

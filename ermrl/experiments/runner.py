@@ -17,7 +17,7 @@ from ermrl.evolution import record as study_record
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.convergence import Convergence
 from ermrl.evolution.search_space import SearchSpace
-from ermrl.experiments.evaluation import MAX_TEST_SEEDS, TestConfig, baseline_files
+from ermrl.experiments.evaluation import MAX_TEST_SEEDS, TestConfig, baseline_files, recorded_test
 from ermrl.experiments.registry import Experiment, Scale, StudySpec
 from ermrl.ppo.config import SB3_DEFAULTS
 from ermrl.reservoir import ReservoirSpec
@@ -56,15 +56,15 @@ class StudyPlan:
 
 @dataclasses.dataclass(frozen=True)
 class TestBudget:
-    """Overrides of every test phase of a run (``--test-seeds``, ``--test-timesteps``, ``--test-lrs``); None keeps
-    the scale's or the study's value. They change the test phases only, never the studies' stored configs, so a
-    rerun with other values keeps the evolutions and selections and redoes only the test phases."""
+    """Overrides of every test phase of a run (``--test-seeds``, ``--test-timesteps``, ``--test-learning-rates``);
+    None keeps the scale's or the study's value. They change the test phases only, never the studies' stored
+    configs, so a rerun with other values keeps the evolutions and selections and redoes only the test phases."""
 
     seeds: int | None = None
     """New seeds per model in every test phase; None: the scale's (smoke 1, small 5, paper 10)."""
     timesteps: int | None = None
     """Env steps per agent in every test phase, the long ones (LunarLander) included; None: the scale's."""
-    ermrl_lrs: tuple[float, ...] | None = None
+    learning_rates: tuple[float, ...] | None = None
     """ER-MRL's learning rates in every test phase, one model each; None: the study's (e.g. 3e-4 1e-4 5e-5).
     The PPO baselines keep the study's rate (SB3's default, 3e-4)."""
     agents_per_run: int | None = None
@@ -81,15 +81,16 @@ class TestBudget:
             raise ConfigError(f"--test-timesteps must be >= 1, got {self.timesteps}")
         if self.timesteps is not None and self.timesteps > MAX_TIMESTEPS:
             raise ConfigError(f"--test-timesteps must be <= {MAX_TIMESTEPS:,}, got {self.timesteps}")
-        if self.ermrl_lrs is not None and not self.ermrl_lrs:
-            raise ConfigError("--test-lrs needs at least one learning rate, e.g. --test-lrs 1e-4")
+        if self.learning_rates is not None and not self.learning_rates:
+            raise ConfigError("--test-learning-rates needs at least one learning rate, e.g. --test-learning-rates 1e-4")
         if self.agents_per_run is not None and self.agents_per_run < 1:
             raise ConfigError(f"--test-agents-per-run must be >= 1, got {self.agents_per_run}")
-        for i, lr in enumerate(self.ermrl_lrs or ()):
-            if not 0 < lr < 1:
-                raise ConfigError(f"--test-lrs: learning rate {lr:g} is outside (0, 1); the paper uses 3e-4 or 1e-4")
-            if lr in self.ermrl_lrs[:i]:
-                raise ConfigError(f"--test-lrs gives {lr:g} twice; give each learning rate once")
+        for i, rate in enumerate(self.learning_rates or ()):
+            if not 0 < rate < 1:
+                raise ConfigError(f"--test-learning-rates: learning rate {rate:g} is outside (0, 1); the paper uses "
+                                  "3e-4 or 1e-4")
+            if rate in self.learning_rates[:i]:
+                raise ConfigError(f"--test-learning-rates gives {rate:g} twice; give each learning rate once")
 
 
 def experiment_dir(experiment: Experiment, scale: Scale, root: Path = Path("runs") / "experiments") -> Path:
@@ -112,7 +113,7 @@ def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "aut
     for spec in experiment.studies:
         agent = AgentConfig(reservoirs=spec.reservoirs, spec=ReservoirSpec(units=spec.units),
                             observed_units=spec.observed_units)
-        ppo = dataclasses.replace(SB3_DEFAULTS, learning_rate=spec.evolve_lr)
+        ppo = dataclasses.replace(SB3_DEFAULTS, learning_rate=spec.evolve_learning_rate)
         trial_steps = scale.timesteps if scale.wiring_only else max(scale.timesteps, spec.min_trial_timesteps)
         train = TrainConfig(env_id=spec.envs[0], total_timesteps=trial_steps, agent=agent, ppo=ppo,
                             backend=backend, env_workers=env_workers)
@@ -121,7 +122,8 @@ def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "aut
                               envs=spec.envs if len(spec.envs) > 1 else ())
         steps = budget.timesteps or (scale.long_test_timesteps if spec.long_test else scale.test_timesteps)
         tests = tuple(TestConfig(seeds=budget.seeds or scale.test_seeds, timesteps=steps,
-                                 ermrl_lrs=budget.ermrl_lrs or spec.ermrl_lrs, ppo_lr=spec.ppo_lr,
+                                 learning_rates=budget.learning_rates or spec.learning_rates,
+                                 baseline_learning_rate=spec.baseline_learning_rate,
                                  env_id=None if (e,) == spec.envs else e, auc_steps=min(300_000, steps))
                       for e in spec.tested_on)
         name = f"{experiment.name}-{scale.name}-{spec.name}"
@@ -233,7 +235,7 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
             if store is not None:
                 files = [f for f in files if f not in counted and not f.exists()]
                 counted.update(files)
-            total += t.seeds * t.timesteps * (len(t.ermrl_lrs) * (1 / rate + extra) + len(files) / rate)
+            total += t.seeds * t.timesteps * (len(t.learning_rates) * (1 / rate + extra) + len(files) / rate)
     busy = sum(1 for p in plans if p.study in unselected or left.get(p.study, p.tests))
     return total + COMPILE_S * busy
 
@@ -308,8 +310,9 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
                 checkpoints.discard(out)  # left by a stop between writing the test phase and removing it
                 log(f"{where}: done before, kept ({out})")
                 continue
-            lrs = ", ".join(f"{lr:g}" for lr in t.ermrl_lrs)
-            log(f"{where}: {t.seeds} seeds × {t.timesteps:,} steps, ER-MRL at lr {lrs}")
+            rates = t.learning_rates or (config.train.ppo.learning_rate,)
+            log(f"{where}: {t.seeds} seeds × {t.timesteps:,} steps, ER-MRL at learning rate"
+                f"{'s' if len(rates) > 1 else ''} {', '.join(f'{rate:g}' for rate in rates)}")
             rows = run_test_phase(study, out, t, progress, log=lambda s, where=where: log(f"{where}: {s}"),
                                   agents_per_run=budget.agents_per_run, env_workers=env_workers,
                                   baseline_store=baseline_store)
@@ -328,9 +331,10 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
 
 def _test_done(out: Path, test: TestConfig, winner: int, log: Callable[[str], None] | None = None) -> bool:
     """Whether ``out`` holds this test phase, for this Φ* and settings, finished. The saved settings are decoded
-    first, so that fields added to TestConfig since they were written take their defaults instead of forcing
-    the test phase to be redone. A test phase whose summary.json or test_config.json is damaged (cut short, not
-    what ermrl wrote) is not done: it is redone, and ``log`` tells why."""
+    first, so that fields added to TestConfig since they were written take their defaults, and fields renamed
+    since are read under their current names, instead of forcing the test phase to be redone. A test phase whose
+    summary.json or test_config.json is damaged (cut short, not what ermrl wrote) is not done: it is redone, and
+    ``log`` tells why."""
     path = out / "test_config.json"
     if not (path.is_file() and (out / "summary.json").is_file()):
         return False
@@ -347,8 +351,9 @@ def _test_done(out: Path, test: TestConfig, winner: int, log: Callable[[str], No
             log(f"{problem}; redoing this test phase")
         return False
     names = {f.name for f in dataclasses.fields(TestConfig)}
-    try:
-        before = storage.from_dict(TestConfig, {k: v for k, v in saved.items() if k in names}, "test_config")
+    try:  # recorded by an older version: its fields under their current names
+        before = storage.from_dict(TestConfig, {k: v for k, v in recorded_test(saved).items() if k in names},
+                                   "test_config")
     except ConfigError:
         return False
     return saved.get("phi_trial") == winner and before == test

@@ -48,7 +48,7 @@ def lunarlander() -> Step:
     return step("lunarlander", "C1 C2 C3", "H1: LunarLanderNoVel with 2 reservoirs, small evolution, test 10 × 3M at "
                 "lr 1e-4 (a model resumes from its snapshot; all 10 agents in the main process)",
                 experiment(PO, "small", "--only", "lunarlander-2res", "--test-seeds", 10, "--test-timesteps", 3000000,
-                           "--test-lrs", "1e-4", "--env-workers", 0))
+                           "--test-learning-rates", "1e-4", "--env-workers", 0))
 
 
 def c3_converged() -> Step:
@@ -60,7 +60,7 @@ def c3_converged() -> Step:
 def lunarlander_medium() -> Step:
     return step("lunarlander_medium", "C2", "the LunarLander target at the paper's per-trial budget (60 trials × 3 "
                 "seeds × 300k), selection, test 10 × 3M at lr 1e-4 (PPO's baselines from the store)",
-                experiment(PO, "medium", "--only", "lunarlander-2res", "--test-lrs", "1e-4", "--env-workers", 0))
+                experiment(PO, "medium", "--only", "lunarlander-2res", "--test-learning-rates", "1e-4", "--env-workers", 0))
 
 
 def lunarlander_lr3e4() -> Step:
@@ -70,7 +70,7 @@ def lunarlander_lr3e4() -> Step:
     return step("lunarlander_lr3e4", "C2 C6", "the LunarLander target's miss: the medium Φ* (evolved at lr 3e-4, "
                 "tested at 1e-4) on the same test seeds at 3e-4, ER-MRL only, paired with its 1e-4 test",
                 train_once(f"{d}/ermrl-lr3e-4", "--env", "LunarLanderNoVel-v3", phi, "--reservoirs", 2, "--seeds", 10,
-                           "--first-seed", 1000, "--timesteps", 3000000, "--ppo-lr", "3e-4", "--env-workers", 0,
+                           "--first-seed", 1000, "--timesteps", 3000000, "--learning-rate", "3e-4", "--env-workers", 0,
                            NOT_SAVED),
                 compare(f"medium Φ*, lr 1e-4={d}/test/summary.json",
                         f"medium Φ*, lr 3e-4={d}/ermrl-lr3e-4/summary.json",
@@ -98,7 +98,7 @@ def lunarlander_1res() -> Step:
                       "--seeds", 3, "--quiet"),
                 train_once(f"{d}/ermrl-1res", "--env", "LunarLanderNoVel-v3",
                            PhiFlags(f"{d}/studies.log", "lunarlander-1res"), "--seeds", 10, "--first-seed", 1000,
-                           "--timesteps", 3000000, "--ppo-lr", "1e-4", "--env-workers", 0, NOT_SAVED),
+                           "--timesteps", 3000000, "--learning-rate", "1e-4", "--env-workers", 0, NOT_SAVED),
                 StopIf(tuple(Missing(p) for p in two), "C3: the 2-reservoir ER-MRL model is not trained yet (step "
                        "lunarlander)"),
                 python("paper/reservoir_count_summary.py", FirstOf(two), d, tee=f"{d}/summary.md"))
@@ -200,11 +200,11 @@ def fitness_1m() -> Step:
     for env, s in (("CartPoleNoVel-v1", "cartpole"), ("PendulumNoVel-v1", "pendulum")):
         actions += _evolve_select_test(f"{s}-1res-fitness-1m", d, f"runs/fitness-1m/{s}", f"{d}/{s}/test",
                                        ("--env", env, "--trials", 60, "--seeds", 3, "--timesteps", 1000000,
-                                        "--fixed-iss", "1.0", "--ppo-lr", "1e-4"),
-                                       ("--ermrl-lr", "1e-4", "--ppo-lr", "3e-4", "--baseline-store", STORE))
+                                        "--fixed-iss", "1.0", "--learning-rate", "1e-4"),
+                                       ("--learning-rate", "1e-4", "--baseline-learning-rate", "3e-4", "--baseline-store", STORE))
     # the default Φ (sr 0.95, lr 0.5, iss 1), not evolved, on the same test seeds: what the Pendulum evolutions miss
     actions.append(train_once(f"{d}/default-phi-pendulum", "--env", "PendulumNoVel-v1", DEFAULT_PHI, "--seeds", 10,
-                              "--first-seed", 1000, "--timesteps", 1000000, "--ppo-lr", "1e-4", NOT_SAVED))
+                              "--first-seed", 1000, "--timesteps", 1000000, "--learning-rate", "1e-4", NOT_SAVED))
     return step("fitness_1m", "C2", "the CartPole and Pendulum targets: evolutions whose trials train 1M steps (the "
                 "test budget) at lr 1e-4, selection (top 5 × 5 × 1M), test 10 × 1M; then the default Φ on Pendulum",
                 actions)

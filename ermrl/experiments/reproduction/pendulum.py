@@ -27,11 +27,11 @@ def medium_lr1e4(study: str, units: int) -> list:
     d = f"docs/data/{study}"
     where = ("--study", study, "--storage", f"{d}/studies.log", "--out", f"runs/{study}")
     return [ermrl("evolve", "--env", "PendulumNoVel-v1", "--units", units, "--reservoirs", 1, "--fixed-iss", "1.0",
-                  "--trials", 60, "--seeds", 3, "--timesteps", 300000, "--ppo-lr", "1e-4", where, "--quiet"),
+                  "--trials", 60, "--seeds", 3, "--timesteps", 300000, "--learning-rate", "1e-4", where, "--quiet"),
             ermrl("select", where, "--top", 5, "--seeds", 5, "--quiet"),
             train_once(f"{d}/ermrl", "--env", "PendulumNoVel-v1", "--units", units,
                        PhiFlags(f"{d}/studies.log", study), "--seeds", 10, "--first-seed", 1000, "--timesteps",
-                       1000000, "--ppo-lr", "1e-4", NOT_SAVED)]
+                       1000000, "--learning-rate", "1e-4", NOT_SAVED)]
 
 
 def pendulum_lr1e4() -> Step:
@@ -56,7 +56,7 @@ def pendulum_paper_500u_interim() -> Step:
                 "the default Φ at 500 units",
                 train_once(d, "--env", "PendulumNoVel-v1", "--units", 500, "--sr", "0.06239118054509163",
                            "--leak-rate", "0.11866375803947449", "--iss", "1.0", "--seeds", 10, "--first-seed", 1000,
-                           "--timesteps", 1000000, "--ppo-lr", "1e-4", NOT_SAVED),
+                           "--timesteps", 1000000, "--learning-rate", "1e-4", NOT_SAVED),
                 compare(f"paper-scale best after 150 trials={d}/summary.json",
                         f"medium Φ*={MEDIUM}/pendulum-500u/test/summary.json",
                         f"default Φ={MEDIUM}/default-phi-500u/summary.json",
@@ -88,11 +88,11 @@ def pendulum_500u_near_default() -> Step:
                 "started at the default Φ's region, 500 units, fitness at the test budget (3 seeds × 1M at lr 1e-4), "
                 "18 trials, top 3 on 3 seeds, then the Φ* on the test seeds",
                 ermrl("evolve", "--env", "PendulumNoVel-v1", "--units", 500, "--reservoirs", 1, "--fixed-iss", "1.0",
-                      "--trials", 18, "--seeds", 3, "--timesteps", 1000000, "--ppo-lr", "1e-4", NEAR_DEFAULT, where,
+                      "--trials", 18, "--seeds", 3, "--timesteps", 1000000, "--learning-rate", "1e-4", NEAR_DEFAULT, where,
                       "--quiet"),
                 ermrl("select", where, "--top", 3, "--seeds", 3, "--quiet"),
                 train_once(f"{d}/ermrl", "--env", "PendulumNoVel-v1", "--units", 500, PhiFlags(f"{d}/studies.log", s),
-                           "--seeds", 10, "--first-seed", 1000, "--timesteps", 1000000, "--ppo-lr", "1e-4", NOT_SAVED),
+                           "--seeds", 10, "--first-seed", 1000, "--timesteps", 1000000, "--learning-rate", "1e-4", NOT_SAVED),
                 compare(f"evolved near the default={d}/ermrl/summary.json",
                         f"default Φ={MEDIUM}/default-phi-500u/summary.json",
                         f"evolved at 3e-4 (medium)={MEDIUM}/pendulum-500u/test/summary.json",
@@ -107,7 +107,7 @@ def wide_evolution(study: str, storage: str, out: str, units: int, trials: int, 
     seeds new for each generation, 10 Φ a generation."""
     return ermrl("evolve", "--env", "PendulumNoVel-v1", "--units", units, "--reservoirs", 1, "--fixed-iss", "1.0",
                  "--trials", trials, "--seeds", 8, "--popsize", 10, "--seed-schedule", "generation", "--timesteps",
-                 1000000, "--ppo-lr", "1e-4", NEAR_DEFAULT, "--study", study, "--storage", storage, "--out", out,
+                 1000000, "--learning-rate", "1e-4", NEAR_DEFAULT, "--study", study, "--storage", storage, "--out", out,
                  *extra, "--quiet")
 
 
@@ -120,7 +120,7 @@ def near_default_wide(units: int) -> list:
     return [wide_evolution(s, storage, f"runs/{s}", units, 40),
             ermrl("select", "--study", s, "--storage", storage, "--out", f"runs/{s}", "--top", 4, "--seeds", 8,
                   "--quiet"),
-            train_saved(f"{EVAL}/{s}", "--env", "PendulumNoVel-v1", "--units", units, "--ppo-lr", "1e-4",
+            train_saved(f"{EVAL}/{s}", "--env", "PendulumNoVel-v1", "--units", units, "--learning-rate", "1e-4",
                         PhiFlags(storage, s))]
 
 
@@ -154,7 +154,7 @@ def pendulum_500u_near_default_wide_50() -> Step:
                       "--seeds", 8, "--quiet", tee=f"{d}/selection.txt"),
                 StopIf((SamePhi(f"{d}/studies.log", f"docs/data/{s}/studies.log", s),),
                        "the Φ* did not change: its test is step pendulum_500u_near_default_wide's"),
-                train_saved(f"{d}/test", "--env", "PendulumNoVel-v1", "--units", 500, "--ppo-lr", "1e-4",
+                train_saved(f"{d}/test", "--env", "PendulumNoVel-v1", "--units", 500, "--learning-rate", "1e-4",
                             PhiFlags(f"{d}/studies.log", s)),
                 compare(f"50 trials={d}/test/summary.json", f"40 trials={t}/summary.json",
                         f"default Φ={MEDIUM}/default-phi-500u/summary.json",
@@ -166,7 +166,7 @@ def pendulum_500u_near_default_wide_50() -> Step:
 def pendulum_500u_more_seeds() -> Step:
     d, s = "docs/data/pendulum-500u-near-default-wide/seeds-1010", "pendulum-500u-near-default-wide"
     t = f"{EVAL}/pendulum-500u-near-default-wide"
-    more = ("--env", "PendulumNoVel-v1", "--units", 500, "--ppo-lr", "1e-4", "--seeds", 10, "--first-seed", 1010,
+    more = ("--env", "PendulumNoVel-v1", "--units", 500, "--learning-rate", "1e-4", "--seeds", 10, "--first-seed", 1010,
             "--timesteps", 1000000, NOT_SAVED)
     # the target stays judged on the test seeds 1000-1009; these seeds only narrow the estimate
     return step("pendulum_500u_more_seeds", "C2", "the Pendulum target: the 8-seed near-default Φ* and the default Φ "

@@ -12,7 +12,7 @@ EVAL = "docs/data/deterministic-eval"
 NEAR = "pendulum-500u-near-default-wide"
 NEAR_PHI = PhiFlags(f"docs/data/{NEAR}/studies.log", NEAR)
 SEEDS_1010 = f"docs/data/{NEAR}/seeds-1010"
-ZOO = ("--n-envs", "4", "--n-steps", "1024", "--gamma", "0.9", "--gae-lambda", "0.95", "--n-epochs", "10", "--ppo-lr",
+ZOO = ("--n-envs", "4", "--n-steps", "1024", "--gamma", "0.9", "--gae-lambda", "0.95", "--n-epochs", "10", "--learning-rate",
        "1e-3", "--clip-range", "0.2", "--ent-coef", "0.0")
 """rl-baselines3-zoo's tuned PendulumNoVel-v1 scalar settings (hyperparams/ppo_lstm.yml)."""
 ZOO_SDE = (*ZOO, "--use-sde", "--sde-sample-freq", "4")
@@ -59,32 +59,32 @@ def deterministic_eval() -> Step:
                 "the test seeds (agents saved), then each evaluated with its deterministic policy over 50 fresh "
                 "episodes",
                 train_saved(f"{d}/pendulum-default-phi-500u", "--env", "PendulumNoVel-v1", "--units", 500, DEFAULT_PHI,
-                            "--ppo-lr", "1e-4"),
-                train_saved(f"{d}/pendulum-medium-500u", "--env", "PendulumNoVel-v1", "--units", 500, "--ppo-lr",
+                            "--learning-rate", "1e-4"),
+                train_saved(f"{d}/pendulum-medium-500u", "--env", "PendulumNoVel-v1", "--units", 500, "--learning-rate",
                             "1e-4", PhiFlags("docs/data/reservoir-sizes-medium/studies.log",
                                      "reservoir-sizes-medium-pendulum-500u")),
                 # the other evolved Pendulum Φ*: steps pendulum_{500u,500u_wide,100u_wide}_near_default and
                 # pendulum{_500u,}_lr1e4
-                [train_saved(f"{d}/pendulum-{s}", "--env", "PendulumNoVel-v1", "--units", n, "--ppo-lr", "1e-4",
+                [train_saved(f"{d}/pendulum-{s}", "--env", "PendulumNoVel-v1", "--units", n, "--learning-rate", "1e-4",
                              PhiFlags(f"docs/data/pendulum-{s}/studies.log", f"pendulum-{s}"))
                  for s, n in units.items()],
-                train_saved(f"{d}/pendulum-default-phi", "--env", "PendulumNoVel-v1", DEFAULT_PHI, "--ppo-lr", "1e-4"),
-                train_saved(f"{d}/pendulum-ppo", "--env", "PendulumNoVel-v1", "--no-reservoir", "--ppo-lr", "3e-4"),
-                train_saved(f"{d}/pendulum-ppo-full-obs", "--env", "Pendulum-v1", "--no-reservoir", "--ppo-lr", "3e-4"),
-                train_saved(f"{d}/cartpole-fitness-1m", "--env", "CartPoleNoVel-v1", "--ppo-lr", "1e-4",
+                train_saved(f"{d}/pendulum-default-phi", "--env", "PendulumNoVel-v1", DEFAULT_PHI, "--learning-rate", "1e-4"),
+                train_saved(f"{d}/pendulum-ppo", "--env", "PendulumNoVel-v1", "--no-reservoir", "--learning-rate", "3e-4"),
+                train_saved(f"{d}/pendulum-ppo-full-obs", "--env", "Pendulum-v1", "--no-reservoir", "--learning-rate", "3e-4"),
+                train_saved(f"{d}/cartpole-fitness-1m", "--env", "CartPoleNoVel-v1", "--learning-rate", "1e-4",
                             PhiFlags("docs/data/fitness-1m/studies.log", "cartpole-1res-fitness-1m")),
-                train_saved(f"{d}/cartpole-paper", "--env", "CartPoleNoVel-v1", "--ppo-lr", "3e-4",
+                train_saved(f"{d}/cartpole-paper", "--env", "CartPoleNoVel-v1", "--learning-rate", "3e-4",
                             PhiFlags("docs/data/partial-observability-paper/studies.log",
                                      "partial-observability-paper-cartpole-1res")),
-                train_saved(f"{d}/cartpole-ppo", "--env", "CartPoleNoVel-v1", "--no-reservoir", "--ppo-lr", "3e-4"),
+                train_saved(f"{d}/cartpole-ppo", "--env", "CartPoleNoVel-v1", "--no-reservoir", "--learning-rate", "3e-4"),
                 # LunarLander's `small` Φ* (2 reservoirs) at the paper's lr 1e-4 and 3M steps (host envs; resumes
                 # from OUT.snapshot after a stop), and the `medium` Φ* at lr 3e-4, the model that met the target
                 train_saved(f"{d}/lunarlander-small-2res", "--env", "LunarLanderNoVel-v3", "--reservoirs", 2,
-                            "--ppo-lr", "1e-4", "--env-workers", 0, "--timesteps", 3000000,
+                            "--learning-rate", "1e-4", "--env-workers", 0, "--timesteps", 3000000,
                             PhiFlags("docs/data/partial-observability-small/studies.log",
                                      "partial-observability-small-lunarlander-2res")),
                 train_saved(f"{d}/lunarlander-medium-2res-lr3e-4", "--env", "LunarLanderNoVel-v3", "--reservoirs", 2,
-                            "--ppo-lr", "3e-4", "--env-workers", 0, "--timesteps", 3000000,
+                            "--learning-rate", "3e-4", "--env-workers", 0, "--timesteps", 3000000,
                             PhiFlags("docs/data/partial-observability-medium/studies.log",
                                      "partial-observability-medium-lunarlander-2res")),
                 _evaluate(f"{d}/lunarlander.md",
@@ -129,7 +129,7 @@ def pendulum_rlzoo_ppo() -> Step:
 
 def pendulum_normalize() -> Step:
     d, e, m = "docs/data/pendulum-normalize", EVAL, SEEDS_1010
-    dev = ("--env", "PendulumNoVel-v1", "--units", 500, "--ppo-lr", "1e-4", "--normalize", "--seeds", 10,
+    dev = ("--env", "PendulumNoVel-v1", "--units", 500, "--learning-rate", "1e-4", "--normalize", "--seeds", 10,
            "--first-seed", 1010, "--timesteps", 1000000, "--no-save-agents", "--quiet")
     return step("pendulum_normalize", "C2", "the Pendulum target, input normalization (rl-zoo's VecNormalize): the "
                 "near-default Φ* and the default Φ at 500 units on the development seeds, then on the test seeds with "
@@ -142,7 +142,7 @@ def pendulum_normalize() -> Step:
                         "--compare", "evolved, normalized", "evolved", "--compare", "default Φ, normalized",
                         "default Φ", "--title", "500 units, seeds 1010-1019", "--figure", f"{d}/dev/pendulum.png",
                         tee=f"{d}/dev/summary.md"),
-                _four(d, ("--ppo-lr", "1e-4", "--normalize"), ("--normalize",)),
+                _four(d, ("--learning-rate", "1e-4", "--normalize"), ("--normalize",)),
                 compare(f"evolved, normalized={d}/evolved-500u/summary.json", f"evolved={e}/{NEAR}/summary.json",
                         f"default Φ, normalized={d}/default-phi-500u/summary.json",
                         f"default Φ={e}/pendulum-default-phi-500u/summary.json",
@@ -188,7 +188,7 @@ def pendulum_rlzoo_sde() -> Step:
 
 def pendulum_rlzoo_policy() -> Step:
     d, e, z, m = "docs/data/pendulum-rlzoo-policy", EVAL, "docs/data/pendulum-rlzoo-sde", SEEDS_1010
-    flags = {"zoo": (*RLZOO_PENDULUM, *RLZOO_POLICY), "paper": ("--ppo-lr", "1e-4", *RLZOO_POLICY)}
+    flags = {"zoo": (*RLZOO_PENDULUM, *RLZOO_POLICY), "paper": ("--learning-rate", "1e-4", *RLZOO_POLICY)}
     net = ("--env", "PendulumNoVel-v1", "--units", 500)
     return step("pendulum_rlzoo_policy", "C2", "the Pendulum target, rl-zoo's policy (64 units, ReLU, no orthogonal "
                 "init) with rl-zoo's recipe (zoo) and the paper's settings (paper): the near-default Φ* on the "
