@@ -47,7 +47,7 @@ def add_parser(sub, formatter) -> None:
                                      "leak rate 1), "
                                      "each --phi, and each --study's Φ*.", formatter_class=formatter)
     pr.add_argument("--env", required=True, help="a NoVel env id, e.g. CartPoleNoVel-v1")
-    pr.add_argument("--phi", nargs=3, type=float, action="append", default=[], metavar=("SR", "LR", "ISS"),
+    pr.add_argument("--phi", nargs=3, type=float, action="append", default=[], metavar=("SR", "LEAK", "ISS"),
                     help="a 1-reservoir Φ to probe (repeatable)")
     pr.add_argument("--study", action="append", default=[], metavar="NAME",
                     help="probe this study's Φ* (the selected trial, else the best; repeatable)")

@@ -21,8 +21,9 @@ def add_parsers(sub, formatter) -> None:
     from ermrl.agent import DEFAULT_PHI
 
     flags = {"sr": ("--sr", "--spectral-radius"), "lr": ("--leak-rate",), "iss": ("--iss", "--input-scaling")}
+    metavars = {"sr": "SR", "lr": "LEAK", "iss": "ISS"}  # not "LR": in RL that is a learning rate
     for name, default in DEFAULT_PHI._asdict().items():
-        p.add_argument(*flags[name], dest=name, type=float, nargs="+", default=[default], metavar=name.upper(),
+        p.add_argument(*flags[name], dest=name, type=float, nargs="+", default=[default], metavar=metavars[name],
                        help=f"{options.PHI_NAMES[name]}, one value or one per reservoir")
     options.refuse_lr(p, "--lr", "--leak-rate")
     p.add_argument("--seeds", type=int, default=3, help="number of seeds (FIRST..FIRST+N-1)")
