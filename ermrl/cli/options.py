@@ -9,6 +9,15 @@ The learning rate has one name everywhere, SB3's: ``--learning-rate`` (PPO's; in
 agents'), ``--baseline-learning-rate`` (the test phase's PPO baselines'), ``--test-learning-rates`` (`ermrl
 experiment run`'s). The flags of older versions (``--ppo-lr``, ``--ermrl-lr``, ``--test-lrs``) are refused with a
 one-line error naming the new one (:func:`refuse_renamed`); a config file's old keys still set the new options.
+
+Why argparse and not tyro, simple-parsing or jsonargparse, which also build a CLI from dataclasses and their field
+docstrings: one ermrl command flattens fields of several dataclasses (``ReservoirConfig``, ``PPOConfig``,
+``EvolutionConfig``, ...) into one flat set of flags whose names are not the fields' (``--leak-rate`` sets
+``SearchSpace.lr`` bounds, ``--learning-rate`` sets ``PPOConfig.learning_rate``), and many of its defaults are "the
+preset's value" resolved after parsing, with errors that must name a flag and exit 2 before any work. Those
+libraries prefix nested fields (``--ppo.learning-rate``), take a dataclass's default as the flag's default, and
+print their own error formats, so each of these would need per-field overrides that amount to this table again,
+plus a dependency. The table here is that one definition: an :class:`Option` per flag.
 """
 
 from __future__ import annotations
