@@ -172,13 +172,14 @@ def draw_hp_map(series: list[StudyPoints], path: Path | str, top: int = 30) -> P
             for r in range(k):
                 ax.scatter(s.sr[:, r], s.lr[:, r], color=colour, marker=MARKERS[r % len(MARKERS)], s=32, alpha=0.8,
                            edgecolors="k", linewidths=0.3)
+            label = s.label if len(s.trials) >= top else f"{s.label}: all {len(s.trials)} trials"  # fewer than top
             handles.append(Line2D([], [], ls="", marker="o", color=colour, markeredgecolor="k", markeredgewidth=0.3,
-                                  label=s.label))
+                                  label=label))
         if k > 1:
             handles += [Line2D([], [], ls="", marker=MARKERS[r % len(MARKERS)], color="grey", label=f"reservoir {r + 1}")
                         for r in range(k)]
         ax.legend(handles=handles, fontsize=7)
-        ax.set_title(f"{k} reservoir{'s' if k > 1 else ''}: top {top} trials of each study")
+        ax.set_title(f"{k} reservoir{'s' if k > 1 else ''}: the best {top} trials of each study")
         ax.set_xlabel("spectral radius (sr)")
         ax.grid(alpha=0.3, which="both")
     ax = axes[0, 0]
