@@ -147,9 +147,9 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
 
     ``agents_per_run`` trains each model in groups of at most that many agents (a seed at one learning rate is
     one agent), one after another, each kept in ``out.partial/`` when it finishes: for a model longer than one
-    sitting (LunarLander at 3M steps), a stop then loses one group at most. Each agent trains as it would in the
-    whole population (its own seed, reservoirs, policy and envs); only floating-point rounding differs, since
-    XLA batches the arithmetic differently for other population sizes. None: every agent of a model at once,
+    machine's allocation (LunarLander at 3M steps), a stop then loses one group at most. Each agent trains as it
+    would in the whole population (its own seed, reservoirs, policy and envs), to the bit (the update runs one
+    agent at a time, :mod:`ermrl.training.programs`). None: every agent of a model at once,
     the fastest.
 
     While a model (or group) trains, its state is kept in ``out.partial/JOB.snapshot`` every ``snapshot_every_s``
