@@ -60,7 +60,7 @@ class Experiment:
     paper: str
     """Where the paper states it."""
     claims: tuple[str, ...]
-    """Claims of shared/paper/claims.md it checks (C1..C17)."""
+    """The paper's claims it checks (C1..C17, as numbered in docs/paper.md)."""
     studies: tuple[StudySpec, ...]
     hp_map: bool = False
     """Draw the cross-study HP map (top 30 Φ of each study on sr × leak rate)."""
