@@ -92,7 +92,7 @@ def read_agent(path: Path | str) -> tuple[dict, dict, dict, np.ndarray | None, d
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"agent file {path} does not exist; give a .npz file from a run folder's agents/ "
-                          "(`ermrl train` and `ermrl test` save them unless --no-save-agents)")
+                          "(`ermrl train` and `ermrl test` save them with `save_agents`, the default)")
     try:
         with np.load(path, allow_pickle=False) as data:
             flat = {k: data[k] for k in data.files}

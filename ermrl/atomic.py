@@ -228,9 +228,10 @@ def _torn(path: Path) -> bool:
         return False
 
 
-def check_folder(path: Path | str, flag: str = "--out") -> Path:
+def check_folder(path: Path | str, flag: str = "`out`") -> Path:
     """``path`` if a folder is or can be made there: it is a folder, or its nearest existing parent is a writable
-    folder. Otherwise ConfigError (one line, naming ``flag``), so that a bad output path fails before any training
+    folder. Otherwise ConfigError (one line, naming ``flag``: the parameter that gave ``path``, in backquotes as
+    :class:`~ermrl.errors.ConfigError` names one, or a flag), so that a bad output path fails before any training
     instead of losing the results at the end."""
     path = Path(path)
     for p in (path, *path.parents):
@@ -260,10 +261,10 @@ def cannot_write(folder: Path) -> str | None:
     return None
 
 
-def check_file(path: Path | str, flag: str = "--out", example: str = "NAME.png") -> Path:
+def check_file(path: Path | str, flag: str = "`out`", example: str = "NAME.png") -> Path:
     """``path`` if a file can be written there: it is not a folder, and its nearest existing parent is a writable
-    folder. Otherwise ConfigError (one line, naming ``flag``; a folder gets the hint ``path/example``), before any
-    work."""
+    folder. Otherwise ConfigError (one line, naming ``flag`` as :func:`check_folder` does; a folder gets the hint
+    ``path/example``), before any work."""
     path = Path(path)
     if path.is_dir():
         raise ConfigError(f"{flag} {path} is a folder; give a file path such as {path / example}")

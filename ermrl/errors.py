@@ -1,6 +1,10 @@
 """The exception types the CLI turns into one-line messages: bad user input (exit code 2) and a run that cannot
 go on for a reason that is not a bug (exit code 1)."""
 
+from __future__ import annotations
+
+from typing import Callable
+
 
 TERMINATED = 143
 """The exit status of a command stopped by SIGTERM (128 + 15, as a shell reports a process killed by it)."""
@@ -15,8 +19,20 @@ def raise_terminated(signum, frame) -> None:
 class ConfigError(ValueError):
     """Bad input from the user (unknown env id, bad bounds, bad storage URL, ...).
 
-    The message is one line that names the problem and the fix.
+    The message is one line that names the problem and the fix. It names a parameter by the library's own name,
+    the dataclass field or function argument, in backquotes, and ``owner`` is the dataclass or function whose
+    parameters those are (None where the message names parameters of several, or none)::
+
+        raise ConfigError(f"`trials` must be <= 100,000, got {self.trials}", owner=type(self))
+
+    A library user reads "`trials` must be ..."; the command line shows each backquoted name as the flag that
+    sets it, "--trials must be ..." (:func:`ermrl.cli.options.cli_message`). ``sr[0]`` names an item of a tuple
+    field (the lower bound of ``sr``), whose flag may be another (``--min-sr``).
     """
+
+    def __init__(self, *args, owner: type | Callable | None = None):
+        super().__init__(*args)
+        self.owner = owner
 
 
 class RunFailed(RuntimeError):

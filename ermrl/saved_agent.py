@@ -305,7 +305,7 @@ def load_agent(path: Path | str, sampling_seed: int = 0) -> SavedAgent:
         found = agent_files.find_agents(path)
         if not found:
             raise ConfigError(f"{path} has no saved agents (agents/*.npz); `ermrl train` and `ermrl test` save "
-                              "them unless --no-save-agents")
+                              "them with `save_agents` (the default)")
         path = found[0]
     meta, actor, critic, log_std, context_norm = agent_files.read_agent(path)
     return SavedAgent(path, meta, actor, critic, log_std, sampling_seed, context_norm)

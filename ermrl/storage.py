@@ -189,7 +189,7 @@ def run_kind(folder: Path | str) -> str | None:
     return "train" if isinstance(record, dict) and "train" in record else None
 
 
-def check_rerun_folder(folder: Path | str, kind: str, flag: str = "--out") -> Path:
+def check_rerun_folder(folder: Path | str, kind: str, flag: str = "`out`") -> Path:
     """``folder`` if a run of ``kind`` may be written there: it is missing, empty, or holds such a run (a rerun
     replaces its files). Otherwise ConfigError before any work: a rerun removes its old agents, so a folder of
     other files (a test phase given to ``ermrl train``, the current folder) is never written into."""

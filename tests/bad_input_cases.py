@@ -244,8 +244,8 @@ CASES = [
                             "(log-uniform)"),
     ("evolve --min-sr 10 --max-sr 1", "ermrl evolve: error: bad sr bounds [10.0, 1.0]: need 0 < --min-sr < --max-sr "
                                       "(log-uniform)"),
-    ("evolve --max-leak-rate 2", "ermrl evolve: error: bad leak-rate bounds [0.01, 2.0]: a leak rate is at most 1; use "
-                                 "--max-leak-rate 1"),
+    ("evolve --max-leak-rate 2", "ermrl evolve: error: bad leak-rate bounds [0.01, 2.0]: a leak rate is at most 1; set "
+                                 "--max-leak-rate to 1"),
     ("evolve --fixed-iss nan", "ermrl evolve: error: --fixed-iss must be positive, got nan"),
     ("evolve --reservoirs 0", "ermrl evolve: error: evolution needs at least 1 reservoir, got 0"),
     ("evolve --normalization minmax", "ermrl evolve: error: argument --normalization: invalid choice: 'minmax' "
@@ -282,7 +282,7 @@ CASES = [
      "is a SQLite database of another program (tables notes), not an Optuna study database); use sqlite:///PATH.db, a "
      "journal file PATH.log, or a reachable database URL"),
     ("report --study k --storage sqlite:///other.db", "ermrl report: error: other.db is not an Optuna study database "
-     "(no 'studies' table); give the study.db that `ermrl evolve` wrote (--out or --storage), or run `ermrl evolve` "
+     "(no 'studies' table); give the study.db that `ermrl evolve` wrote (--storage/--out), or run `ermrl evolve` "
      "to create the study"),
     ("evolve --env CartPole-v1 --env Pendulum-v1 --baselines list.json", "ermrl evolve: error: baselines table "
      "list.json is damaged (needs a 'random' table and a 'ppo' list); fix it or delete it and rerun `ermrl baselines`"),
@@ -295,14 +295,14 @@ CASES = [
     (f"evolve --study one --storage {SQLITE} --units 50",
      "ermrl evolve: error: study 'one' already exists with another config (popsize: 6 in the study, 7 here; "
      "search_space.iss: {\"fixed\": 1.0} in the study, [0.1, 10.0] here; seeds: 1 in the study, 3 here; ...); rerun "
-     "with the same flags to resume it, or pick a new --study name"),
+     "with the same settings to resume it, or pick a new --study"),
     (f"evolve --study one --storage {SQLITE} --units 50 --popsize 6 --seeds 1 --fixed-iss 1 --timesteps 2048",
      "ermrl evolve: error: study 'one' already exists with another config (train.agent.spec.units: 100 in the "
-     "study, 50 here); rerun with the same flags to resume it, or pick a new --study name"),
+     "study, 50 here); rerun with the same settings to resume it, or pick a new --study"),
     (f"evolve --study one --storage {SQLITE} --env CartPoleNoVel-v1 --env Pendulum-v1 --popsize 6 --seeds 1 "
      "--fixed-iss 1 --timesteps 2048", "ermrl evolve: error: study 'one' already exists with another config (envs: "
-     "[\"CartPoleNoVel-v1\"] in the study, [\"CartPoleNoVel-v1\", \"Pendulum-v1\"] here); rerun with the same flags "
-     "to resume it, or pick a new --study name"),
+     "[\"CartPoleNoVel-v1\"] in the study, [\"CartPoleNoVel-v1\", \"Pendulum-v1\"] here); rerun with the same settings "
+     "to resume it, or pick a new --study"),
     # -- select, test, report: missing studies and their numbers -------------------------------------------
     ("select", "ermrl select: error: the following arguments are required: --study; see `ermrl select --help`"),
     ("select --study nope", "ermrl select: error: no study 'nope': runs/nope/study.db does not exist; run `ermrl "

@@ -40,14 +40,16 @@ def test_the_rule_needs_g_narrow_generations_in_a_row_and_the_last_complete():
 
 
 @pytest.mark.parametrize("width, generations, message", [
-    (0.0, 3, "--converged-width must be in (0, 10] decades, got 0.0"),
-    (float("nan"), 3, "--converged-width must be in (0, 10] decades, got nan"),
-    (0.01, 0, "--converged-generations must be in 1..1000, got 0"),
+    (0.0, 3, "`width` must be in (0, 10] decades, got 0.0"),
+    (float("nan"), 3, "`width` must be in (0, 10] decades, got nan"),
+    (0.01, 0, "`generations` must be in 1..1000, got 0"),
 ])
-def test_a_bad_rule_is_refused_with_its_flag(width, generations, message):
+def test_a_bad_rule_is_refused_with_its_parameter(width, generations, message):
+    """The library names Convergence's fields; the command line shows them as --converged-width and
+    --converged-generations (test_bad_input.py)."""
     with pytest.raises(ConfigError) as e:
         Convergence(width, generations)
-    assert str(e.value) == message
+    assert (str(e.value), e.value.owner) == (message, Convergence)
 
 
 def test_the_spread_read_back_from_the_paper_study_matches_the_sampled_phi():

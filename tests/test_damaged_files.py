@@ -342,9 +342,10 @@ def test_a_read_only_command_leaves_a_database_that_is_no_study_alone(work, kind
     before = snapshot(work)
     r = ermrl(*STUDY_COMMANDS[command])
     prefix = "ermrl analyze" if command == "hp-map" else f"ermrl {command}"
+    flags = "--storage" if command == "hp-map" else "--storage/--out"  # the flags that give the study's storage
     message = ("run/study.db is empty (0 bytes), not a study database; run `ermrl evolve` to create the study, or "
-               "pass --storage" if kind == "empty" else
+               f"pass {flags}" if kind == "empty" else
                "run/study.db is not an Optuna study database (no 'studies' table); give the study.db that `ermrl "
-               "evolve` wrote (--out or --storage), or run `ermrl evolve` to create the study")
+               f"evolve` wrote ({flags}), or run `ermrl evolve` to create the study")
     assert (r.returncode, one_line(r.stderr)) == (2, f"{prefix}: error: {message}")
     assert snapshot(work) == before

@@ -137,7 +137,7 @@ def test_unknown_env_id_names_close_matches():
 
 
 def test_jax_backend_refuses_a_host_only_env():
-    with pytest.raises(ConfigError, match=r"^env 'LunarLander-v3' has no JAX version; use --backend host or auto"):
+    with pytest.raises(ConfigError, match=r"^env 'LunarLander-v3' has no JAX version; use `backend` host or auto"):
         envs.describe("LunarLander-v3", "jax")
     assert envs.resolve_backend("LunarLander-v3") == "host"
     assert envs.resolve_backend("CartPole-v1") == "jax"

@@ -35,5 +35,5 @@ def test_auto_picks_the_mujoco_backend_for_the_locomotion_tasks_only():
     assert envs.resolve_backend("CartPoleNoVel-v1") == "jax"
     assert envs.resolve_backend("LunarLander-v3") == "host"
     assert envs.resolve_backend("InvertedPendulum-v5") == "host"  # a MuJoCo env without a batched version
-    with pytest.raises(ConfigError, match="has no batched MuJoCo version; use --backend host or auto"):
+    with pytest.raises(ConfigError, match="has no batched MuJoCo version; use `backend` host or auto"):
         envs.resolve_backend("LunarLander-v3", "mujoco")

@@ -268,7 +268,7 @@ def test_rollout_with_normalize_and_sde():
 
 
 def test_unsupported_combinations_fail_in_one_line():
-    with pytest.raises(ConfigError, match="sees the raw observation: use --reservoirs 0") as e:
+    with pytest.raises(ConfigError, match="sees the raw observation: use `reservoirs` 0") as e:
         Trainer(lstm_config(reservoirs=1))
     assert "\n" not in str(e.value)
     with pytest.raises(ConfigError, match="runs on the JAX backend only") as e:

@@ -119,7 +119,7 @@ def test_use_sde_is_refused_where_sb3_refuses_it_and_kept_out_of_old_records():
     with pytest.raises(ConfigError, match="^sde_sample_freq must be -1"):
         PPOConfig(use_sde=True, sde_sample_freq=0)
     for model in ("ff", "lstm"):
-        with pytest.raises(ConfigError, match="^--use-sde needs continuous"):
+        with pytest.raises(ConfigError, match="^`use_sde` needs continuous"):
             make_agent_fns(TrainConfig(env_id="CartPoleNoVel-v1", agent=AgentConfig(reservoirs=0),
                                        ppo=PPOConfig(use_sde=True, model=model)))
     assert "use_sde" not in ermrl.storage.to_dict(PPOConfig())

@@ -64,7 +64,8 @@ def test_no_saved_agents_is_a_one_line_error(tmp_path):
     assert not (run / "agents").exists()
     r = cli("video", run)
     assert r.returncode == 2 and r.stderr == (f"ermrl video: error: {run} has no saved agents (agents/*.npz); "
-                                              "`ermrl train` and `ermrl test` save them unless --no-save-agents\n")
+                                              "`ermrl train` and `ermrl test` save them with --save-agents (the "
+                                              "default)\n")
     r = cli("video", tmp_path / "nope")
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "does not exist" in r.stderr
 

@@ -361,5 +361,5 @@ def test_two_workers_with_one_index_are_warned_on_stderr(tmp_path, capsys):
     worker._trials()  # once is enough
     out, err = capsys.readouterr()
     warning = (f"warning: another worker (pid {os.getpid()} on {WorkerId.here(0).host}) also runs with "
-               "--worker-index 0; give each worker its own index, or their sampler draws repeat")
+               "worker index 0; give each worker its own index, or their sampler draws repeat")
     assert err.count(warning) == 1 and warning not in out and not any("worker-index" in line for line in lines)

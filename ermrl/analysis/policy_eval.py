@@ -58,7 +58,7 @@ def evaluate_runs(sources: dict[str, list[Path]], episodes: int = 10, first_seed
     rows = []
     for label, files in sources.items():
         if not files:
-            raise ConfigError(f"{label} holds no saved agent; train with --save-agents (the default) first")
+            raise ConfigError(f"{label} holds no saved agent; train with `save_agents` (the default) first")
     total, start = sum(map(len, sources.values())), time.monotonic()
     for label, files in sources.items():
         found = []

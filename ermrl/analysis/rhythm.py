@@ -136,7 +136,7 @@ def agent_rhythm(agent_file: Path | str, seed: int = 0, max_steps: int | None = 
         env.close()
     if len(obs) < min_steps:
         raise ShortEpisode(f"{agent_file}: the episode lasted {len(obs)} steps, too few for a spectrum; "
-                           "use an agent that survives longer or a larger --max-steps")
+                           "use an agent that survives longer or a larger `max_steps`", owner=agent_rhythm)
     o, c = summed(obs), summed(context)
     return {"agent": str(agent_file), "env_id": agent.env_id, "reservoirs": agent.config.reservoirs,
             "steps": len(obs), "return": float(rewards.sum()), "rhythm_observation": rhythm_score(o),
@@ -162,7 +162,7 @@ def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0
     signals, left_out_all = {}, []
     for label, files in sources.items():
         if not files:
-            raise ConfigError(f"{label} holds no saved agent; train with --save-agents (the default) first")
+            raise ConfigError(f"{label} holds no saved agent; train with `save_agents` (the default) first")
         found, left_out = [], []
         for f in files:
             try:
@@ -171,7 +171,8 @@ def compare_runs(sources: dict[str, list[Path]], path: Path | str, seed: int = 0
                 left_out.append(str(error).split(";")[0])
         if not found:
             raise ConfigError(f"every agent of {label} ended its episode in under {min_steps} steps, too few for a "
-                              f"spectrum (first: {left_out[0]}); use agents that survive longer or a larger --max-steps")
+                              f"spectrum (first: {left_out[0]}); use agents that survive longer or a larger "
+                              "`max_steps`", owner=compare_runs)
         left_out_all += left_out
         rows += found
         obs, inp = (np.array([r[k] for r in found]) for k in ("rhythm_observation", "rhythm_input"))

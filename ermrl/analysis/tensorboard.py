@@ -28,9 +28,9 @@ TRAIN_TAGS = {"policy_loss": ("train/policy_gradient_loss", 1.0), "value_loss": 
 """Results.metrics name -> (SB3 tag, sign): SB3 logs the entropy loss, i.e. minus the entropy."""
 
 
-def check_logdir(path: Path | str) -> Path:
-    """``path`` if TensorBoard runs can be written there; one-line ConfigError otherwise (before any training)."""
-    return storage.check_folder(path, "--tensorboard")
+def check_logdir(logdir: Path | str) -> Path:
+    """``logdir`` if TensorBoard runs can be written there; one-line ConfigError otherwise (before any training)."""
+    return storage.check_folder(logdir, "`logdir`")
 
 
 def run_name(label: str, seed: int) -> str:

@@ -12,13 +12,16 @@ the same settings on other seeds may be joined into one variant (their seeds poo
 curve over the first 300k steps), then the PPO rows of the first test phase; then, for each comparison (A, B),
 P(A > B) with its 95% CI (rliable) and the paired difference A − B over the shared seeds (SciPy: BCa CI, Wilcoxon p).
 :func:`curves` gives the learning curves to draw, from the ``curves.csv`` beside each ``summary.json``. Errors are
-ValueError (a file of the wrong kind, an unknown label) or OSError (a missing file), each one line.
+ValueError (a file of the wrong kind, an unknown label: a ConfigError where it names a parameter) or OSError (a
+missing file), each one line.
 """
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+
+from ermrl.errors import ConfigError
 
 
 def read_rows(path: Path, auc: bool = True) -> tuple[dict, list[dict]]:
@@ -90,8 +93,10 @@ def _train_curves(summaries: tuple[Path, ...]) -> tuple | None:
             return None
         (curve,) = read_curves_csv(path).values()
         if read and not np.array_equal(curve[0], read[0][0]):
-            raise ValueError(f"{path} has other update steps than {summaries[0].parent / 'curves.csv'}; join runs "
-                             "of the same --timesteps")
+            from ermrl.training.config import TrainConfig
+
+            raise ConfigError(f"{path} has other update steps than {summaries[0].parent / 'curves.csv'}; join runs "
+                              "of the same `total_timesteps`", owner=TrainConfig)
         read.append(curve)
     return read[0][0], np.concatenate([values for _, values in read])
 
@@ -144,8 +149,8 @@ def table(variants: dict[str, list[Path]], comparisons: list[tuple[str, str]]) -
     for a, b in comparisons:
         for name in (a, b):
             if name not in scores:
-                raise ValueError(f"--compare names {name!r}, which is none of the variants or PPO rows "
-                                 f"({', '.join(scores)})")
+                raise ConfigError(f"`comparisons` names {name!r}, which is none of the variants or PPO rows "
+                                  f"({', '.join(scores)})", owner=table)
     for a, b in comparisons:
         p = probability_of_improvement(list(scores[a].values()), list(scores[b].values()))
         shared = sorted(set(scores[a]) & set(scores[b]))

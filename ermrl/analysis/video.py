@@ -94,9 +94,9 @@ def write_video(agent, out: Path | str, episodes: int = 1, seed: int = 0, max_st
     if out.suffix.lower() not in FORMATS:
         raise ConfigError(f"video file {out} must end in .mp4 or .gif")
     if episodes < 1:
-        raise ConfigError(f"--episodes must be >= 1, got {episodes}")
+        raise ConfigError(f"`episodes` must be >= 1, got {episodes}", owner=write_video)
     if max_steps is not None and max_steps < 1:
-        raise ConfigError(f"--max-steps must be >= 1, got {max_steps}")
+        raise ConfigError(f"`max_steps` must be >= 1, got {max_steps}", owner=write_video)
     if not hasattr(agent, "act"):
         from ermrl.saved_agent import load_agent
 

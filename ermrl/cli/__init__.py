@@ -91,12 +91,13 @@ def _subparser(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Arg
     return node if node is not parser else None
 
 
-def parse(argv: list[str] | None = None) -> argparse.Namespace:
-    """Parses ``argv``; a ``--config FILE`` gives defaults that the other flags override."""
+def parse(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None) -> argparse.Namespace:
+    """Parses ``argv`` with ``parser`` (default: :func:`build_parser`'s); a ``--config FILE`` gives defaults that
+    the other flags override."""
     from ermrl.cli import config_files
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
+    parser = parser or build_parser()
     args = _parse_all(parser, argv)
     if getattr(args, "config", None) is not None:
         config_files.apply_config_file(_subparser(parser, argv), args.config)
@@ -154,6 +155,16 @@ def _damaged_storage(e: BaseException, args: argparse.Namespace | None) -> str |
     return damaged_storage_message(url, reason)
 
 
+def _shown(e: Exception, parser: argparse.ArgumentParser | None, argv: list[str]) -> str:
+    """The message of a ConfigError or RunFailed as the command shows it: the parameters that a library message
+    names (`trials`) as the flags of the command's parser (--trials); see :func:`ermrl.cli.options.cli_message`."""
+    from ermrl.cli import options
+
+    if parser is None:
+        return str(e)
+    return options.cli_message(e, _subparser(parser, argv) or parser)
+
+
 def _leave(code: int, why: str) -> NoReturn:
     """Ends the process at once after Ctrl-C or SIGTERM, once a worker gave its trials back: XLA's threads may
     still be running a computation, and the interpreter's teardown races them (seen as "pure virtual method called",
@@ -191,22 +202,19 @@ def _run(argv: list[str] | None) -> int:
     words = [a for a in argv if not a.startswith("-")]
     command = f"ermrl {words[0]}" if words and words[0] in handlers else "ermrl"
     debug = "--debug" in argv  # known before parsing, so that parse errors honour it too
+    parser = None
     try:
-        args = parse(argv)
+        parser = build_parser()
+        args = parse(argv, parser)
         command = f"ermrl {args.command}"
         devices.setup()  # one JAX CPU device per core, or a one-line error for a bad ERMRL_CPU_DEVICES
         compile_cache.enable()  # a second run of the same shapes reads its programs back instead of compiling
         return handlers[args.command](args)
-    except ConfigError as e:
+    except (ConfigError, RunFailed) as e:
         if debug:
             traceback.print_exc()
-        print(f"{command}: error: {e}", file=sys.stderr)
-        return 2
-    except RunFailed as e:
-        if debug:
-            traceback.print_exc()
-        print(f"{command}: error: {e}", file=sys.stderr)
-        return 1
+        print(f"{command}: error: {_shown(e, parser, argv)}", file=sys.stderr)
+        return 2 if isinstance(e, ConfigError) else 1
     except KeyboardInterrupt:
         _leave(130, "interrupted")
     except SystemExit as e:

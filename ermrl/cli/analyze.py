@@ -29,9 +29,9 @@ def add_parser(sub, formatter) -> None:
                                      "Mann–Whitney test of its leak rates against the other studies' of the same K) "
                                      "to a .md beside it, also printed.", formatter_class=formatter)
     hp.add_argument("studies", nargs="+", metavar="STUDY", help="study names, as given to or printed by `ermrl evolve`")
-    hp.add_argument("--storage", type=options.storage, default=None,
-                    help="Optuna storage URL or journal file holding every study (default: each study's sqlite in "
-                         "runs/STUDY)")
+    options.sets(hp.add_argument("--storage", type=options.storage, default=None,
+                                 help="Optuna storage URL or journal file holding every study (default: each "
+                                      "study's sqlite in runs/STUDY)"), "storage_url")
     hp.add_argument("--top", type=int, default=30, help="best completed trials drawn per study")
     hp.add_argument("--out", type=options.path, required=True, metavar="FIG.png",
                     help="figure path (.png, .svg or .pdf); FIG.csv beside it holds the points drawn, FIG.md "
@@ -51,8 +51,9 @@ def add_parser(sub, formatter) -> None:
                     help="a 1-reservoir Φ to probe (repeatable)")
     pr.add_argument("--study", action="append", default=[], metavar="NAME",
                     help="probe this study's Φ* (the selected trial, else the best; repeatable)")
-    pr.add_argument("--storage", type=options.storage, default=None, help="Optuna storage URL or journal file of the studies "
-                                                    "(default: each study's sqlite in runs/STUDY)")
+    options.sets(pr.add_argument("--storage", type=options.storage, default=None,
+                                 help="Optuna storage URL or journal file of the studies (default: each study's "
+                                      "sqlite in runs/STUDY)"), "storage_url")
     pr.add_argument("--units", type=int, default=100, help="units per reservoir")
     pr.add_argument("--episodes", type=int, default=300, help="random-policy episodes (a quarter held out)")
     pr.add_argument("--seed", type=int, default=0, help="seeds the episodes and the reservoir draw")

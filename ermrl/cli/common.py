@@ -18,12 +18,19 @@ def config_and_quiet(p, quiet: bool = True) -> None:
 
 
 def study_location(p, required: bool = True) -> None:
-    p.add_argument("--study", required=required, default=None,
-                   help="study name, as given to or printed by `ermrl evolve`" + ("" if required else
-                                                                                   " (default ENV-Kres-STEPSk)"))
-    p.add_argument("--storage", type=options.storage, default=None,
-                   help="Optuna storage URL or journal file (default sqlite in runs/STUDY)")
-    p.add_argument("--out", type=options.path, default=None, help="run folder (default runs/STUDY)")
+    """Adds --study, --storage and --out: the study's name (``name`` of the study functions) and where it is
+    (their ``storage_url``: --storage, else the sqlite file in the --out folder)."""
+    from ermrl.evolution import study
+
+    options.sets(p.add_argument("--study", required=required, default=None,
+                                help="study name, as given to or printed by `ermrl evolve`" + (
+                                    "" if required else " (default ENV-Kres-STEPSk)")),
+                 "name", study.load_study, study.check_resumable, study.open_study)
+    options.sets(p.add_argument("--storage", type=options.storage, default=None,
+                                help="Optuna storage URL or journal file (default sqlite in runs/STUDY)"),
+                 "storage_url")
+    options.sets(p.add_argument("--out", type=options.path, default=None, help="run folder (default runs/STUDY)"),
+                 "storage_url")
 
 
 STUDY_NAME_MAX = 100

@@ -10,6 +10,8 @@ from ermrl.errors import ConfigError
 
 
 def add_parser(sub, formatter) -> None:
+    from ermrl.analysis import variants
+
     p = sub.add_parser("compare", help="variants' test phases or train runs on the same seeds: table, P(A > B), "
                                        "paired differences, curves",
                        description="Read each variant's summary.json (a test phase's, or an `ermrl train` run's; "
@@ -23,9 +25,10 @@ def add_parser(sub, formatter) -> None:
     p.add_argument("variants", nargs="+", type=_variant, metavar="LABEL=SUMMARY.json",
                    help="a variant's name and its test phase's summary.json, or `ermrl train` runs' summaries "
                         "joined by ',' (their seeds pooled)")
-    p.add_argument("--compare", nargs=2, action="append", default=[], metavar=("A", "B"),
-                   help="print P(A > B) and the paired difference A − B (repeatable); A or B: a variant's label or "
-                        "a PPO row's model name, e.g. 'PPO (full observation)'")
+    options.sets(p.add_argument("--compare", nargs=2, action="append", default=[], metavar=("A", "B"),
+                                help="print P(A > B) and the paired difference A − B (repeatable); A or B: a "
+                                     "variant's label or a PPO row's model name, e.g. 'PPO (full observation)'"),
+                 "comparisons", variants.table)
     p.add_argument("--figure", type=options.path, default=None, metavar="PATH.png",
                    help="also draw every variant's ER-MRL learning curve and the PPO curves there")
     p.add_argument("--title", default="reservoir variants, the same seeds",
@@ -62,6 +65,8 @@ def cmd_compare(args) -> int:
         text = v.table(variants, [tuple(c) for c in args.compare])
         drawn = v.curves(variants) if figure is not None else None  # read before anything is written
         title = f"{v.env_id(args.variants[0][1][0])}: {args.title}"
+    except ConfigError:
+        raise  # the library's message, whose parameters the command shows as its flags
     except (OSError, ValueError) as e:
         raise ConfigError(common.one_line(e)) from None
     sys.stdout.write(text)

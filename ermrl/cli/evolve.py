@@ -11,6 +11,8 @@ MAX_SAMPLER_SEED = 2**32 - 1
 
 
 def add_parser(sub, formatter) -> None:
+    from ermrl.evolution.config import EvolveConfig  # lazily, like the options' dataclasses
+
     p = sub.add_parser("evolve", help="evolve reservoir hyperparameters Φ with CMA-ES (the outer loop)",
                        description="Evolve Φ = (sr, leak rate, iss) with Optuna. Each generation (popsize trials × "
                                    "seeds) trains as one population per env. With several --env, a trial's fitness is the "
@@ -18,15 +20,17 @@ def add_parser(sub, formatter) -> None:
                                    "Rerunning the same command resumes the study; several processes or machines "
                                    "may work on one study at once, each with its own --worker-index "
                                    "(docs/scaling.md).", formatter_class=formatter)
-    p.add_argument("--env", action="append", default=None, metavar="ID",
-                   help="env id; repeat for a fitness over several envs (default CartPoleNoVel-v1)")
+    options.sets(p.add_argument("--env", action="append", default=None, metavar="ID",
+                                help="env id; repeat for a fitness over several envs (default CartPoleNoVel-v1)"),
+                 "envs", EvolveConfig)
     p.add_argument("--seeds", type=int, default=3, help="seeds per trial; its fitness is their mean")
     options.add_options(p, "env", "agent", "ppo", "search", "workers", "convergence")
     p.add_argument("--baselines", type=options.path, default=None, metavar="TABLE",
                    help="baselines table (default runs/baselines.json over the shipped one); several envs only")
-    p.add_argument("--allow-weak-baselines", action="store_true",
-                   help="go on when vanilla PPO does not beat the random agent on an env at this budget (nScore is "
-                        "then meaningless there); for wiring checks only")
+    options.sets(p.add_argument("--allow-weak-baselines", action="store_true",
+                                help="go on when vanilla PPO does not beat the random agent on an env at this "
+                                     "budget (nScore is then meaningless there); for wiring checks only"),
+                 "allow_weak")  # baseline_runs.with_baselines's
     common.study_location(p, required=False)
     p.add_argument("--no-estimate", action="store_true", help="skip the warm-up that estimates the total time")
     common.config_and_quiet(p)

@@ -26,8 +26,9 @@ def add_parser(sub, formatter) -> None:
                           "paper's trial budget, 60 trials), converged (the paper's trial budget until CMA-ES has "
                           "converged, at most 900 trials), paper (`ermrl experiment list` gives each one's numbers)")
     run.add_argument("--only", nargs="+", default=(), metavar="STUDY", help="run only these studies of the experiment")
-    run.add_argument("--storage", type=options.storage, default=None,
-                     help="Optuna storage URL or journal file for every study (default a journal file in the folder)")
+    options.sets(run.add_argument("--storage", type=options.storage, default=None,
+                                  help="Optuna storage URL or journal file for every study (default a journal file "
+                                       "in the folder)"), "storage_url")
     run.add_argument("--out", type=options.path, default=None, help="folder (default runs/experiments/NAME-SCALE)")
     run.add_argument("--baselines", type=options.path, default=None, metavar="TABLE",
                      help="baselines table for studies over several envs (default runs/baselines.json over the shipped one)")

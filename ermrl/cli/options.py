@@ -18,6 +18,10 @@ preset's value" resolved after parsing, with errors that must name a flag and ex
 libraries prefix nested fields (``--ppo.learning-rate``), take a dataclass's default as the flag's default, and
 print their own error formats, so each of these would need per-field overrides that amount to this table again,
 plus a dependency. The table here is that one definition: an :class:`Option` per flag.
+
+The same definitions turn the library's messages into the command line's: a library error names a parameter by
+its own name in backquotes ("`trials` must be <= 100,000"), and :func:`cli_message` shows the flag that sets it
+("--trials must be <= 100,000").
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import ast
 import dataclasses
 import functools
 import inspect
+import re
 import textwrap
 from pathlib import Path
 
@@ -74,10 +79,24 @@ class Option:
     """argparse extras: type, nargs, choices, action, metavar."""
     name: str | None = None
     """The value's name (argparse's dest, a config file's key) when it is not the flag's."""
+    item: int | None = None
+    """The item of the field's tuple that the flag sets, if it sets one (``--min-sr``: 0 of SearchSpace.sr);
+    library messages name it ``sr[0]``."""
+    gives: str | None = None
+    """The library parameter that the flag gives where it sets no field (``--tensorboard``: the ``logdir`` of
+    :mod:`ermrl.analysis.tensorboard`'s functions), named so in library messages."""
 
     @property
     def dest(self) -> str:
         return self.name or self.flag.lstrip("-").replace("-", "_")
+
+    @property
+    def parameter(self) -> str | None:
+        """The library's name of what the flag sets: the field (``trials``), an item of it (``sr[0]``) or
+        :attr:`gives`; None for a flag of the command line only (``--preset``)."""
+        if self.field is None:
+            return self.gives
+        return self.field if self.item is None else f"{self.field}[{self.item}]"
 
     def field_default(self):
         if self.owner is None or self.default is not None:
@@ -91,7 +110,75 @@ class Option:
         kwargs = dict(self.kwargs)
         if kwargs.get("action") != "store_true":
             kwargs.setdefault("default", self.field_default())
-        parser.add_argument(self.flag, help=text, dest=self.dest, **kwargs)
+        action = parser.add_argument(self.flag, help=text, dest=self.dest, **kwargs)
+        if self.parameter is not None:
+            sets(action, self.parameter, *(() if self.field is None else (self.owner,)))
+
+
+GIVES = "ermrl_gives"
+"""The attribute of an argparse action that holds the (owner, parameter) pairs its flag sets (:func:`sets`)."""
+
+
+def sets(action: argparse.Action, parameter: str, *owners) -> argparse.Action:
+    """Records that the flag of ``action`` gives the library's ``parameter`` of each of ``owners`` (dataclasses
+    or functions; none: of any), so that :func:`cli_message` shows the flag where a library message names the
+    parameter. For a flag whose dest is not the parameter's name (``ermrl evolve --env``: EvolveConfig's
+    ``envs``); an :class:`Option` records its field itself. Returns ``action``."""
+    setattr(action, GIVES, getattr(action, GIVES, ()) + tuple((owner, parameter) for owner in owners or (None,)))
+    return action
+
+
+PARAMETER = re.compile(r"`([A-Za-z_]\w*(?:\[\d+\])?)`")
+"""A parameter named in a library message: an identifier in backquotes, optionally an item of it (`sr[0]`)."""
+
+
+def _long(action: argparse.Action) -> str | None:
+    return next((f for f in action.option_strings if f.startswith("--")), None)
+
+
+def _sets(pairs, parameter: str, owner) -> bool:
+    """Whether (owner, parameter) ``pairs`` set ``parameter`` (an item of it too: ``sr`` for ``sr[0]``) of
+    ``owner``; a pair without owner sets that parameter of any, and a message without owner means any."""
+    return any((p == parameter or p.startswith(parameter + "[")) and (o is None or owner is None or o is owner)
+               for o, p in pairs)
+
+
+def cli_message(error: BaseException, parser: argparse.ArgumentParser | None = None) -> str:
+    """``str(error)`` as the command line shows it: each parameter that the library's message names in backquotes
+    replaced by the flag that sets it in this command ("`trials` must be >= 1" -> "--trials must be >= 1").
+
+    ``error``: an exception whose ``owner`` attribute, where it has one (:class:`~ermrl.errors.ConfigError`), is
+    the dataclass or function whose parameters the message names. ``parser``: the command's (sub)parser, whose
+    flags are looked at first (None: the option tables only). Returns a str, one line as the message is.
+
+    A name becomes, in this order:
+
+    1. the command's flags that set that parameter of the owner (an :class:`Option` of its field, or a flag
+       marked by :func:`sets`), joined by '/' when there are several (``sr``: --min-sr/--max-sr);
+    2. else the command's flag whose dest is the name, if exactly one (``--backend``, ``--seeds``);
+    3. else the flag of the option tables, any command's, that sets it (the owner's field; without owner, a
+       field or dest of that name), if exactly one (``popsize`` in a memory estimate of ``ermrl train``);
+    4. else it stays as it is, in backquotes.
+    """
+    owner = getattr(error, "owner", None)
+    actions = parser._actions if parser is not None else []
+    table = None
+
+    def flag(match: re.Match) -> str:
+        nonlocal table
+        name = match.group(1)
+        flags = [_long(a) for a in actions if _sets(getattr(a, GIVES, ()), name, owner) and _long(a)]
+        if flags:
+            return "/".join(dict.fromkeys(flags))
+        by_dest = {_long(a) for a in actions if a.dest == name and _long(a)}
+        if len(by_dest) == 1:
+            return by_dest.pop()
+        table = table if table is not None else [o for group in _groups().values() for o in group]
+        found = {o.flag for o in table if o.parameter is not None and _sets([(o.owner, o.parameter)], name, owner)
+                 or owner is None and o.dest == name}
+        return found.pop() if len(found) == 1 else match.group(0)
+
+    return PARAMETER.sub(flag, str(error))
 
 
 def path(value: str) -> Path:
@@ -146,10 +233,10 @@ def _groups() -> dict[str, list[Option]]:
     from ermrl.reservoir import ReservoirSpec
     from ermrl.training import TrainConfig
 
-    space = [Option(f"--{b}-{FLAG_NAMES.get(hp, hp)}", SearchSpace, hp, name=f"{b}_{hp}",
+    space = [Option(f"--{b}-{FLAG_NAMES.get(hp, hp)}", SearchSpace, hp, name=f"{b}_{hp}", item=item,
                     help=f"{'lower' if b == 'min' else 'upper'} log-uniform bound of the {PHI_NAMES[hp]}.",
-                    default=getattr(SearchSpace, hp)[0 if b == "min" else 1], kwargs={"type": float})
-             for hp in ("sr", "lr", "iss") for b in ("min", "max")]
+                    default=getattr(SearchSpace, hp)[item], kwargs={"type": float})
+             for hp in ("sr", "lr", "iss") for item, b in enumerate(("min", "max"))]
     return {
         "env": [Option("--timesteps", TrainConfig, "total_timesteps", kwargs={"type": int}),
                 Option("--backend", TrainConfig, "backend", kwargs={"choices": ["auto", "jax", "mujoco", "host"]}),
@@ -233,7 +320,7 @@ def _groups() -> dict[str, list[Option]]:
                                                      "folder per agent (LABEL_seedN) with SB3's tag names "
                                                      "(rollout/ep_rew_mean; rollout/ep_len_mean, time/fps, train/* "
                                                      "where known), the env step count as the global step.",
-                               kwargs={"type": path, "metavar": "DIR"})],
+                               kwargs={"type": path, "metavar": "DIR"}, gives="logdir")],
     }
 
 

@@ -49,13 +49,13 @@ def resolve_backend(env_id: str, backend: str = "auto") -> str:
     if backend in ("auto", "jax") and base_id in GYMNAX_IDS:
         return "jax"
     if backend == "jax":
-        raise ConfigError(f"env {env_id!r} has no JAX version; use --backend host or auto "
-                          f"(the JAX backend runs: {', '.join(jax_ids())})")
+        raise ConfigError(f"env {env_id!r} has no JAX version; use `backend` host or auto "
+                          f"(the JAX backend runs: {', '.join(jax_ids())})", owner=resolve_backend)
     if backend in ("auto", "mujoco") and base_id in TASK_IDS:
         return "mujoco"
     if backend == "mujoco":
-        raise ConfigError(f"env {env_id!r} has no batched MuJoCo version; use --backend host or auto (the MuJoCo "
-                          f"backend runs: {', '.join(sorted(TASK_IDS))})")
+        raise ConfigError(f"env {env_id!r} has no batched MuJoCo version; use `backend` host or auto (the MuJoCo "
+                          f"backend runs: {', '.join(sorted(TASK_IDS))})", owner=resolve_backend)
     if not host_backend.known(base_id):
         raise _unknown(env_id, base_id)
     return "host"

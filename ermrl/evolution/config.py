@@ -57,17 +57,20 @@ class EvolveConfig:
     def __post_init__(self):
         for name in ("trials", "seeds"):
             if getattr(self, name) < 1:
-                raise ConfigError(f"--{name} must be >= 1, got {getattr(self, name)}")
+                raise ConfigError(f"`{name}` must be >= 1, got {getattr(self, name)}", owner=type(self))
         if self.trials > MAX_TRIALS:
-            raise ConfigError(f"--trials must be <= {MAX_TRIALS:,} (the paper's studies have 900), got {self.trials}")
+            raise ConfigError(f"`trials` must be <= {MAX_TRIALS:,} (the paper's studies have 900), got {self.trials}",
+                              owner=type(self))
         if self.popsize is not None and self.popsize < 2:
-            raise ConfigError(f"--popsize must be >= 2 (CMA-ES needs at least 2 candidates a generation), got {self.popsize}")
+            raise ConfigError(f"`popsize` must be >= 2 (CMA-ES needs at least 2 candidates a generation), got "
+                              f"{self.popsize}", owner=type(self))
         if self.seed_schedule not in SEED_SCHEDULES:
             raise ConfigError(f"unknown seed schedule {self.seed_schedule!r}; choose one of {', '.join(SEED_SCHEDULES)}")
         if self.normalization not in NORMALIZATIONS:
             raise ConfigError(f"unknown normalization {self.normalization!r}; choose one of {', '.join(NORMALIZATIONS)}")
         if len(set(self.env_ids)) != len(self.env_ids):
-            raise ConfigError(f"--env lists an env twice: {', '.join(self.env_ids)}; give each env once")
+            raise ConfigError(f"`envs` lists an env twice: {', '.join(self.env_ids)}; give each env once",
+                              owner=type(self))
         if self.baselines and tuple(b.env_id for b in self.baselines) != self.env_ids:
             raise ConfigError("baselines must list the evolution's envs in order")
 

@@ -56,9 +56,10 @@ class Convergence:
 
     def __post_init__(self):
         if not (math.isfinite(self.width) and 0 < self.width <= MAX_WIDTH):
-            raise ConfigError(f"--converged-width must be in (0, {MAX_WIDTH:g}] decades, got {self.width}")
+            raise ConfigError(f"`width` must be in (0, {MAX_WIDTH:g}] decades, got {self.width}", owner=type(self))
         if not 1 <= self.generations <= MAX_GENERATIONS:
-            raise ConfigError(f"--converged-generations must be in 1..{MAX_GENERATIONS}, got {self.generations}")
+            raise ConfigError(f"`generations` must be in 1..{MAX_GENERATIONS}, got {self.generations}",
+                              owner=type(self))
 
     def describe(self) -> str:
         return f"spread below {self.width:g} decades in every parameter for {self.generations} generations"

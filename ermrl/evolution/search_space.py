@@ -37,12 +37,13 @@ class SearchSpace:
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
                 flag = {"lr": "leak-rate"}.get(name, name)
-                raise ConfigError(f"bad {flag} bounds [{lo}, {hi}]: need 0 < --min-{flag} < --max-{flag} (log-uniform)")
+                raise ConfigError(f"bad {flag} bounds [{lo}, {hi}]: need 0 < `{name}[0]` < `{name}[1]` (log-uniform)",
+                                  owner=type(self))
         if self.lr[1] > 1:
-            raise ConfigError(f"bad leak-rate bounds [{self.lr[0]}, {self.lr[1]}]: a leak rate is at most 1; use "
-                              "--max-leak-rate 1")
+            raise ConfigError(f"bad leak-rate bounds [{self.lr[0]}, {self.lr[1]}]: a leak rate is at most 1; set `lr[1]` "
+                              "to 1", owner=type(self))
         if self.fixed_iss is not None and not (math.isfinite(self.fixed_iss) and self.fixed_iss > 0):
-            raise ConfigError(f"--fixed-iss must be positive, got {self.fixed_iss}")
+            raise ConfigError(f"`fixed_iss` must be positive, got {self.fixed_iss}", owner=type(self))
 
     @property
     def searched(self) -> tuple[str, ...]:

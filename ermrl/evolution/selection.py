@@ -108,7 +108,7 @@ def select(study: optuna.Study, config: EvolveConfig, top: int, seeds: int,
     """Re-evaluates the ``top`` best trials on ``seeds`` fresh seeds (every env of the evolution, its budget
     and fitness) as one population per env; records and returns the selection."""
     if top < 1 or seeds < 1:
-        raise ConfigError(f"--top and --seeds must be >= 1, got {top} and {seeds}")
+        raise ConfigError(f"`top` and `seeds` must be >= 1, got {top} and {seeds}", owner=select)
     trials = ranked_trials(study)[:top]
     if not trials:
         raise ConfigError(f"study {study.study_name!r} has no completed trial yet; run `ermrl evolve` first")

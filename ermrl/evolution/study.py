@@ -154,7 +154,7 @@ def open_study(storage_url: str, name: str, sampler, record: dict | None,
             stored = study.user_attrs[ATTR]  # a worker started at the same moment may have written its own
         else:
             stored = _current(stored)
-        _check_same_config(name, stored, record)
+        _check_same_config(name, stored, record, open_study)
         _record_software(study, name)
     return study
 
@@ -171,19 +171,19 @@ def check_resumable(storage_url: str, name: str, record: dict) -> None:
     except KeyError:
         return
     if stored is not None:
-        _check_same_config(name, _current(stored), record)
+        _check_same_config(name, _current(stored), record, check_resumable)
 
 
-def _check_same_config(name: str, stored: dict, record: dict) -> None:
+def _check_same_config(name: str, stored: dict, record: dict, owner: object) -> None:
     """ConfigError naming the first setting in which the study's config ``stored`` and this run's ``record``
-    differ (:func:`_comparable`)."""
+    differ (:func:`_comparable`); ``owner``: the function whose ``name`` the study's name is."""
     a, b = json.loads(_comparable(stored)), json.loads(_comparable(record))
     if a == b:
         return
     shown = [f"{key}: {_shown(was)} in the study, {_shown(now)} here" for key, was, now in _differences(a, b)]
     raise ConfigError(f"study {name!r} already exists with another config ({'; '.join(shown[:3])}"
-                      f"{'; ...' if len(shown) > 3 else ''}); rerun with the same flags to resume it, or pick a new "
-                      "--study name")
+                      f"{'; ...' if len(shown) > 3 else ''}); rerun with the same settings to resume it, or pick a new "
+                      "`name`", owner=owner)
 
 
 def _differences(a, b, key: str = "") -> list[tuple[str, object, object]]:
@@ -238,7 +238,8 @@ def load_study(storage_url: str, name: str) -> optuna.Study:
     """An existing ermrl study; ConfigError if it does not exist or was not made by ``ermrl evolve``."""
     path = storage_file(storage_url)
     if path is not None and not path.exists():  # never create an empty database or journal just to look
-        raise ConfigError(f"no study {name!r}: {path} does not exist; run `ermrl evolve` first or pass --storage/--out")
+        raise ConfigError(f"no study {name!r}: {path} does not exist; run `ermrl evolve` first or pass `storage_url`",
+                          owner=load_study)
     if storage_url.startswith("sqlite:///"):  # Optuna would create its tables in any SQLite file, even an empty one
         _check_study_database(storage_url, path)
     storage = make_storage(storage_url)
@@ -282,12 +283,11 @@ def _check_study_database(storage_url: str, path: Path) -> None:
     Other errors (a locked or unreadable file) are left to the storage to report."""
     import sqlite3
 
-    fix = "give the study.db that `ermrl evolve` wrote (--out or --storage), or run `ermrl evolve` to create the study"
     if not path.is_file():
         return
     if path.stat().st_size == 0:
         raise ConfigError(f"{path} is empty (0 bytes), not a study database; run `ermrl evolve` to create the "
-                          "study, or pass --storage")
+                          "study, or pass `storage_url`", owner=load_study)
     try:
         connection = sqlite3.connect(f"{path.absolute().as_uri()}?mode=ro", uri=True)
         try:
@@ -302,7 +302,9 @@ def _check_study_database(storage_url: str, path: Path) -> None:
             return  # no SQLite file at all, locked, unreadable, ...: the storage's own one-line error says it
         raise ConfigError(damaged_storage_message(storage_url, reason)) from None
     if found is None:
-        raise ConfigError(f"{path} is not an Optuna study database (no 'studies' table); {fix}")
+        raise ConfigError(f"{path} is not an Optuna study database (no 'studies' table); give the study.db that "
+                          "`ermrl evolve` wrote (`storage_url`), or run `ermrl evolve` to create the study",
+                          owner=load_study)
     if check and check[0] != "ok":  # e.g. "Page 3: btreeInitPage() returns error code 11"
         raise ConfigError(damaged_storage_message(storage_url, "database disk image is malformed"))
 

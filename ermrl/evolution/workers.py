@@ -75,19 +75,22 @@ class WorkerConfig:
 
     def __post_init__(self):
         if self.batch is not None and self.batch < 1:
-            raise ConfigError(f"--batch must be >= 1, got {self.batch}")
+            raise ConfigError(f"`batch` must be >= 1, got {self.batch}", owner=type(self))
         if self.worker_index < 0:
-            raise ConfigError(f"--worker-index must be >= 0, got {self.worker_index}")
+            raise ConfigError(f"`worker_index` must be >= 0, got {self.worker_index}", owner=type(self))
         if self.worker_index > MAX_WORKER_INDEX:
-            raise ConfigError(f"--worker-index must be <= {MAX_WORKER_INDEX:,}, got {self.worker_index}")
+            raise ConfigError(f"`worker_index` must be <= {MAX_WORKER_INDEX:,}, got {self.worker_index}",
+                              owner=type(self))
         if self.heartbeat_interval < 1:
-            raise ConfigError(f"--heartbeat-interval must be >= 1 (seconds), got {self.heartbeat_interval}")
+            raise ConfigError(f"`heartbeat_interval` must be >= 1 (seconds), got {self.heartbeat_interval}",
+                              owner=type(self))
         if max(self.heartbeat_interval, self.grace_period) > MAX_WAIT_S:
-            raise ConfigError(f"--heartbeat-interval and --grace-period must be <= {MAX_WAIT_S} seconds (a day), "
-                              f"got {self.heartbeat_interval} and {self.grace_period}")
+            raise ConfigError(f"`heartbeat_interval` and `grace_period` must be <= {MAX_WAIT_S} seconds (a day), "
+                              f"got {self.heartbeat_interval} and {self.grace_period}", owner=type(self))
         if self.grace_period <= self.heartbeat_interval:
-            raise ConfigError(f"--grace-period ({self.grace_period} s) must be longer than --heartbeat-interval "
-                              f"({self.heartbeat_interval} s), or live trials would be failed as lost")
+            raise ConfigError(f"`grace_period` ({self.grace_period} s) must be longer than `heartbeat_interval` "
+                              f"({self.heartbeat_interval} s), or live trials would be failed as lost",
+                              owner=type(self))
 
 
 def worker_seed(seed: int | None, index: int) -> int | None:
@@ -241,7 +244,7 @@ class Worker:
                 if t.state == TrialState.RUNNING and isinstance(w, dict) and w.get("index") == self.me.index \
                         and not self.me.owns(t):
                     print(f"warning: another worker (pid {w.get('pid')} on {w.get('host')}) also runs with "
-                          f"--worker-index {self.me.index}; give each worker its own index, or their sampler "
+                          f"worker index {self.me.index}; give each worker its own index, or their sampler "
                           "draws repeat", file=sys.stderr, flush=True)
                     self._warned_index = True
                     break

@@ -71,7 +71,7 @@ def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path
     return out
 
 
-EVOLVE_ADVICE = "use a larger --timesteps, drop the env, or pass --allow-weak-baselines to go on anyway"
+EVOLVE_ADVICE = "use a larger `total_timesteps`, drop the env, or pass `allow_weak` to go on anyway"
 
 
 def check_informative(baselines, normalization: str, advice: str = EVOLVE_ADVICE) -> None:

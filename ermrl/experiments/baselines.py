@@ -87,7 +87,7 @@ def random_scores(env_id: str, episodes: int = 100, seed: int = 0) -> RandomScor
     from ermrl.envs.host_groups import make_gymnasium
 
     if episodes < 1:
-        raise ConfigError(f"--random-episodes must be >= 1, got {episodes}")
+        raise ConfigError(f"`episodes` must be >= 1, got {episodes}", owner=random_scores)
     info = envs.describe(env_id, "host")
     env = make_gymnasium(info.base_id)
     env.action_space.seed(seed)
@@ -115,7 +115,7 @@ def ppo_fitness(env_id: str, timesteps: int, seeds: int, learning_rate: float = 
     from ermrl.training import Population, TrainConfig, Trainer
 
     if seeds < 1:
-        raise ConfigError(f"--seeds must be >= 1, got {seeds}")
+        raise ConfigError(f"`seeds` must be >= 1, got {seeds}", owner=ppo_fitness)
     config = TrainConfig(env_id=env_id, total_timesteps=timesteps, agent=AgentConfig(reservoirs=0),
                          ppo=_ppo_config(learning_rate, settings), backend=backend,
                          env_workers=env_workers)

@@ -67,19 +67,21 @@ class TestConfig:
 
     def __post_init__(self):
         if not 1 <= self.seeds <= MAX_TEST_SEEDS:
-            raise ConfigError(f"--seeds must be in 1..{MAX_TEST_SEEDS:,} (the paper tests on 10), got {self.seeds}")
+            raise ConfigError(f"`seeds` must be in 1..{MAX_TEST_SEEDS:,} (the paper tests on 10), got {self.seeds}",
+                              owner=type(self))
         if self.timesteps < 1:
-            raise ConfigError(f"--timesteps must be >= 1, got {self.timesteps}")
+            raise ConfigError(f"`timesteps` must be >= 1, got {self.timesteps}", owner=type(self))
         baseline = () if self.baseline_learning_rate is None else (self.baseline_learning_rate,)
         for rate in self.learning_rates + baseline:
             if not 0 < rate < 1:
                 raise ConfigError(f"learning rate {rate} is outside (0, 1); the paper uses 3e-4 or 1e-4")
         if self.trial is not None and self.trial < 0:
-            raise ConfigError(f"--trial must be a trial number >= 0, got {self.trial}")
+            raise ConfigError(f"`trial` must be a trial number >= 0, got {self.trial}", owner=type(self))
         if self.auc_steps is not None and self.auc_steps < 1:
-            raise ConfigError(f"--auc-steps must be >= 1, got {self.auc_steps}")
+            raise ConfigError(f"`auc_steps` must be >= 1, got {self.auc_steps}", owner=type(self))
         if self.env_id is not None and not self.env_id.strip():
-            raise ConfigError("--env is empty; give an env id, or leave --env out to test on the evolution's env")
+            raise ConfigError("`env_id` is empty; give an env id, or leave `env_id` out to test on the evolution's env",
+                              owner=type(self))
 
 
 RENAMED_FIELDS = {"ermrl_lrs": "learning_rates", "ppo_lr": "baseline_learning_rate"}
@@ -189,9 +191,9 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
         folders[baseline_labels[0]] = folder
 
     if agents_per_run is not None and agents_per_run < 1:
-        raise ConfigError(f"--agents-per-run must be >= 1, got {agents_per_run}")
+        raise ConfigError(f"`agents_per_run` must be >= 1, got {agents_per_run}", owner=run_test_phase)
     if baseline_store is not None:
-        storage.check_folder(baseline_store, "--baseline-store")
+        storage.check_folder(baseline_store, "`baseline_store`")
     partial, discarded = checkpoints.open_partial(out, {"test": storage.to_dict(test), "phi_trial": trial.number},
                                                   _recorded_settings)
     if discarded and log:

@@ -74,30 +74,32 @@ class TestBudget:
 
     def __post_init__(self):
         if self.seeds is not None and self.seeds < 1:
-            raise ConfigError(f"--test-seeds must be >= 1, got {self.seeds}")
+            raise ConfigError(f"`seeds` must be >= 1, got {self.seeds}", owner=type(self))
         if self.seeds is not None and self.seeds > MAX_TEST_SEEDS:
-            raise ConfigError(f"--test-seeds must be <= {MAX_TEST_SEEDS:,} (the paper tests on 10), got {self.seeds}")
+            raise ConfigError(f"`seeds` must be <= {MAX_TEST_SEEDS:,} (the paper tests on 10), got {self.seeds}",
+                              owner=type(self))
         if self.timesteps is not None and self.timesteps < 1:
-            raise ConfigError(f"--test-timesteps must be >= 1, got {self.timesteps}")
+            raise ConfigError(f"`timesteps` must be >= 1, got {self.timesteps}", owner=type(self))
         if self.timesteps is not None and self.timesteps > MAX_TIMESTEPS:
-            raise ConfigError(f"--test-timesteps must be <= {MAX_TIMESTEPS:,}, got {self.timesteps}")
+            raise ConfigError(f"`timesteps` must be <= {MAX_TIMESTEPS:,}, got {self.timesteps}", owner=type(self))
         if self.learning_rates is not None and not self.learning_rates:
-            raise ConfigError("--test-learning-rates needs at least one learning rate, e.g. --test-learning-rates 1e-4")
+            raise ConfigError("`learning_rates` needs at least one learning rate (e.g. 1e-4)", owner=type(self))
         if self.agents_per_run is not None and self.agents_per_run < 1:
-            raise ConfigError(f"--test-agents-per-run must be >= 1, got {self.agents_per_run}")
+            raise ConfigError(f"`agents_per_run` must be >= 1, got {self.agents_per_run}", owner=type(self))
         for i, rate in enumerate(self.learning_rates or ()):
             if not 0 < rate < 1:
-                raise ConfigError(f"--test-learning-rates: learning rate {rate:g} is outside (0, 1); the paper uses "
-                                  "3e-4 or 1e-4")
+                raise ConfigError(f"`learning_rates`: learning rate {rate:g} is outside (0, 1); the paper uses 3e-4 "
+                                  "or 1e-4", owner=type(self))
             if rate in self.learning_rates[:i]:
-                raise ConfigError(f"--test-learning-rates gives {rate:g} twice; give each learning rate once")
+                raise ConfigError(f"`learning_rates` gives {rate:g} twice; give each learning rate once",
+                                  owner=type(self))
 
 
 def experiment_dir(experiment: Experiment, scale: Scale, root: Path = Path("runs") / "experiments") -> Path:
     return root / f"{experiment.name}-{scale.name}"
 
 
-WEAK_ADVICE = "give the study longer trials (a larger --scale) or leave it out (--only)"
+WEAK_ADVICE = "give the study longer trials (a larger `scale`) or leave it out (`only`)"
 """What to do when a study's PPO baseline does not beat a random agent at its trial budget."""
 
 

@@ -131,7 +131,8 @@ class PPOConfig:
     def check_actions(self, env_id: str, discrete: bool) -> None:
         """ConfigError when these settings cannot act in ``env_id`` (gSDE needs Box actions, as in SB3)."""
         if self.use_sde and discrete:
-            raise ConfigError(f"--use-sde needs continuous (Box) actions; {env_id}'s actions are discrete")
+            raise ConfigError(f"`use_sde` needs continuous (Box) actions; {env_id}'s actions are discrete",
+                              owner=type(self))
 
     @property
     def buffer_size(self) -> int:

@@ -55,4 +55,4 @@ def check(config, agents: int, obs_dim: int, action_dim: int, what: str = "this 
     raise ConfigError(f"{what} needs at least {need / 2**30:,.0f} GiB of memory ({agents} agent{'s' if agents > 1 else ''}"
                       + (f" × {k} reservoir{'s' if k > 1 else ''} of {n} units" if k else "")
                       + f", {config.ppo.n_envs} envs × {config.ppo.n_steps} steps per rollout), more than this "
-                      f"machine's {have / 2**30:,.0f} GiB; lower --units, --seeds, --popsize, --n-envs or --n-steps")
+                      f"machine's {have / 2**30:,.0f} GiB; lower `units`, `seeds`, `popsize`, `n_envs` or `n_steps`")

@@ -72,10 +72,10 @@ class RecurrentStep(NamedTuple):
 def check(config) -> None:
     """One-line ConfigErrors for what the LSTM baseline does not support (``config`` a TrainConfig)."""
     if config.agent.reservoirs != 0:
-        raise ConfigError(f"the LSTM baseline (--model lstm) sees the raw observation: use --reservoirs 0, "
+        raise ConfigError(f"the LSTM baseline (`model` lstm) sees the raw observation: use `reservoirs` 0, "
                           f"got {config.agent.reservoirs}")
     if envs.resolve_backend(config.env_id, config.backend) != "jax":
-        raise ConfigError(f"the LSTM baseline (--model lstm) runs on the JAX backend only, and {config.env_id} would "
+        raise ConfigError(f"the LSTM baseline (`model` lstm) runs on the JAX backend only, and {config.env_id} would "
                           f"run on the host (backend {config.backend!r}); JAX envs: {', '.join(envs.jax_ids())}")
 
 
