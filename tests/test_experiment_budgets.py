@@ -6,6 +6,7 @@ once per session (smoke_study.py)."""
 import dataclasses
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import optuna

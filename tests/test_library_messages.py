@@ -171,7 +171,7 @@ def test_config_dataclasses_name_their_fields():
         (lambda: SearchSpace(sr=(10.0, 1.0)), SearchSpace,
          "bad sr bounds [10.0, 1.0]: need 0 < `sr[0]` < `sr[1]` (log-uniform)"),
         (lambda: SearchSpace(lr=(0.01, 2.0)), SearchSpace,
-         "bad lr bounds [0.01, 2.0]: a leak rate is at most 1; set `lr[1]` to 1"),
+         "bad leak-rate bounds [0.01, 2.0]: a leak rate is at most 1; set `lr[1]` to 1"),
         (lambda: TestConfig(auc_steps=0), TestConfig, "`auc_steps` must be >= 1, got 0"),
         (lambda: TestConfig(env_id=" "), TestConfig,
          "`env_id` is empty; give an env id, or leave `env_id` out to test on the evolution's env"),
