@@ -88,7 +88,7 @@ def main(argv=None) -> int:
         for c in a.input_connectivity:
             ReservoirSpec(input_connectivity=c)
         if a.out:
-            storage.check_file(a.out, example="saturation.md")
+            storage.check_file(a.out, "--out", example="saturation.md")
         rows = [r for env in a.env for r in measure(env, a.input_connectivity, a.draws, a.episodes)]
     except ConfigError as error:
         print(f"input_saturation.py: error: {error}", file=sys.stderr)
