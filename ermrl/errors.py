@@ -26,7 +26,7 @@ class ConfigError(ValueError):
         raise ConfigError(f"`trials` must be <= 100,000, got {self.trials}", owner=type(self))
 
     A library user reads "`trials` must be ..."; the command line shows each backquoted name as the flag that
-    sets it, "--trials must be ..." (:func:`ermrl.cli.options.cli_message`). ``sr[0]`` names an item of a tuple
+    sets it, "--trials must be ..." (:func:`ermrl.cli.messages.cli_message`). ``sr[0]`` names an item of a tuple
     field (the lower bound of ``sr``), whose flag may be another (``--min-sr``).
     """
 

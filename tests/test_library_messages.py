@@ -221,7 +221,7 @@ def _parser(*words: str):
 
 
 def test_the_command_line_shows_each_parameter_as_its_flag():
-    from ermrl.cli.options import cli_message
+    from ermrl.cli.messages import cli_message
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.search_space import SearchSpace
     from ermrl.experiments.evaluation import TestConfig

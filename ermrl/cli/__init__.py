@@ -157,12 +157,12 @@ def _damaged_storage(e: BaseException, args: argparse.Namespace | None) -> str |
 
 def _shown(e: Exception, parser: argparse.ArgumentParser | None, argv: list[str]) -> str:
     """The message of a ConfigError or RunFailed as the command shows it: the parameters that a library message
-    names (`trials`) as the flags of the command's parser (--trials); see :func:`ermrl.cli.options.cli_message`."""
-    from ermrl.cli import options
+    names (`trials`) as the flags of the command's parser (--trials); see :func:`ermrl.cli.messages.cli_message`."""
+    from ermrl.cli import messages
 
     if parser is None:
         return str(e)
-    return options.cli_message(e, _subparser(parser, argv) or parser)
+    return messages.cli_message(e, _subparser(parser, argv) or parser)
 
 
 def _leave(code: int, why: str) -> NoReturn:

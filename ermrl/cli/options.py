@@ -20,7 +20,7 @@ print their own error formats, so each of these would need per-field overrides t
 plus a dependency. The table here is that one definition: an :class:`Option` per flag.
 
 The same definitions turn the library's messages into the command line's: a library error names a parameter by
-its own name in backquotes ("`trials` must be <= 100,000"), and :func:`cli_message` shows the flag that sets it
+its own name in backquotes ("`trials` must be <= 100,000"), and :func:`ermrl.cli.messages.cli_message` shows the flag that sets it
 ("--trials must be <= 100,000").
 """
 
@@ -121,64 +121,11 @@ GIVES = "ermrl_gives"
 
 def sets(action: argparse.Action, parameter: str, *owners) -> argparse.Action:
     """Records that the flag of ``action`` gives the library's ``parameter`` of each of ``owners`` (dataclasses
-    or functions; none: of any), so that :func:`cli_message` shows the flag where a library message names the
+    or functions; none: of any), so that :func:`ermrl.cli.messages.cli_message` shows the flag where a library message names the
     parameter. For a flag whose dest is not the parameter's name (``ermrl evolve --env``: EvolveConfig's
     ``envs``); an :class:`Option` records its field itself. Returns ``action``."""
     setattr(action, GIVES, getattr(action, GIVES, ()) + tuple((owner, parameter) for owner in owners or (None,)))
     return action
-
-
-PARAMETER = re.compile(r"`([A-Za-z_]\w*(?:\[\d+\])?)`")
-"""A parameter named in a library message: an identifier in backquotes, optionally an item of it (`sr[0]`)."""
-
-
-def _long(action: argparse.Action) -> str | None:
-    return next((f for f in action.option_strings if f.startswith("--")), None)
-
-
-def _sets(pairs, parameter: str, owner) -> bool:
-    """Whether (owner, parameter) ``pairs`` set ``parameter`` (an item of it too: ``sr`` for ``sr[0]``) of
-    ``owner``; a pair without owner sets that parameter of any, and a message without owner means any."""
-    return any((p == parameter or p.startswith(parameter + "[")) and (o is None or owner is None or o is owner)
-               for o, p in pairs)
-
-
-def cli_message(error: BaseException, parser: argparse.ArgumentParser | None = None) -> str:
-    """``str(error)`` as the command line shows it: each parameter that the library's message names in backquotes
-    replaced by the flag that sets it in this command ("`trials` must be >= 1" -> "--trials must be >= 1").
-
-    ``error``: an exception whose ``owner`` attribute, where it has one (:class:`~ermrl.errors.ConfigError`), is
-    the dataclass or function whose parameters the message names. ``parser``: the command's (sub)parser, whose
-    flags are looked at first (None: the option tables only). Returns a str, one line as the message is.
-
-    A name becomes, in this order:
-
-    1. the command's flags that set that parameter of the owner (an :class:`Option` of its field, or a flag
-       marked by :func:`sets`), joined by '/' when there are several (``sr``: --min-sr/--max-sr);
-    2. else the command's flag whose dest is the name, if exactly one (``--backend``, ``--seeds``);
-    3. else the flag of the option tables, any command's, that sets it (the owner's field; without owner, a
-       field or dest of that name), if exactly one (``popsize`` in a memory estimate of ``ermrl train``);
-    4. else it stays as it is, in backquotes.
-    """
-    owner = getattr(error, "owner", None)
-    actions = parser._actions if parser is not None else []
-    table = None
-
-    def flag(match: re.Match) -> str:
-        nonlocal table
-        name = match.group(1)
-        flags = [_long(a) for a in actions if _sets(getattr(a, GIVES, ()), name, owner) and _long(a)]
-        if flags:
-            return "/".join(dict.fromkeys(flags))
-        by_dest = {_long(a) for a in actions if a.dest == name and _long(a)}
-        if len(by_dest) == 1:
-            return by_dest.pop()
-        table = table if table is not None else [o for group in _groups().values() for o in group]
-        found = {o.flag for o in table if o.parameter is not None and _sets([(o.owner, o.parameter)], name, owner)
-                 or owner is None and o.dest == name}
-        return found.pop() if len(found) == 1 else match.group(0)
-
-    return PARAMETER.sub(flag, str(error))
 
 
 def path(value: str) -> Path:
