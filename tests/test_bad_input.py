@@ -154,6 +154,27 @@ def test_the_matrix_covers_every_command():
     assert len(CASES) >= 50
 
 
+def _shown(cell: str, full: str) -> bool:
+    """Whether a docs table cell shows ``full``: the same text, or (for a long one) its start then "…"."""
+    cell = cell.replace("\\|", "|")
+    return cell == full or ("…" in cell and full.startswith(cell.split("…")[0]) and len(cell.split("…")[0]) >= 12)
+
+
+def test_the_reliability_docs_list_every_case_in_order():
+    """docs/reliability.md's table "The cases" shows this matrix, row i for case i, with its exact message (a long
+    input or message shows its start, then "…"), so the page cannot drift from what the CLI prints."""
+    text = (Path(__file__).parents[1] / "docs" / "reliability.md").read_text().split("### The cases", 1)[1]
+    rows = [re.split(r"(?<!\\)\|", line)[1:-1] for line in text.split("\n#", 1)[0].splitlines()
+            if re.match(r"^\| \d+ \|", line)]
+    assert len(rows) >= len(CASES)
+    for i, (command, message) in enumerate(CASES):
+        number, shown_command, shown_message, code = (cell.strip() for cell in rows[i])
+        expected = f"| {i + 1} | `{('ermrl ' + command).strip()}` | {message.replace('|', chr(92) + '|')} | 2 |"
+        assert number == str(i + 1) and code == "2", expected
+        assert _shown(shown_command.split("`")[1], ("ermrl " + command).strip()), expected
+        assert _shown(shown_message, message), expected
+
+
 def test_a_mujoco_gl_that_mujoco_refuses_is_named(work, capsys, monkeypatch):
     """MUJOCO_GL is read when MuJoCo is imported; a value it refuses is a one-line error before any env is made."""
     monkeypatch.setenv("MUJOCO_GL", "opengl")
