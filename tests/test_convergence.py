@@ -2,9 +2,12 @@
 ``ermrl evolve --until-converged`` on a real (tiny) study."""
 
 import json
+import math
+import re
 import shutil
 from pathlib import Path
 
+import numpy as np
 import optuna
 import pytest
 from optuna.trial import TrialState
@@ -37,6 +40,42 @@ def test_the_rule_needs_g_narrow_generations_in_a_row_and_the_last_complete():
     assert stop_generation(wide_sr, rule) is None
     assert stop_generation({2: {"x": 0.0}, 3: {"x": 0.0}, 5: {"x": 0.0}}, rule) is None
     assert stop_generation(_spread(0.009), Convergence(0.01, 1)) == 2
+
+
+def test_the_projection_extrapolates_each_parameters_rate_and_waits_for_the_slowest():
+    rule = Convergence(width=0.01, generations=3)
+    steady = {g: {"lr": 0.5 * 0.9 ** (g - 2), "sr": 0.2 * 0.8 ** (g - 2)} for g in range(2, 12)}
+    projection = convergence.project(steady, rule)
+    # lr reaches 0.01 when 0.9^(g-2) = 0.02, at g = 2 + ln 0.02 / ln 0.9; then 3 generations in a row
+    assert projection.generation == pytest.approx(2 + math.log(0.02) / math.log(0.9) + 2)
+    assert projection.window == (7, 11) and projection.slowest() == "lr"
+    assert projection.factors == pytest.approx({"lr": 0.9, "sr": 0.8})
+    assert convergence.project(steady, rule, window=10).generation == pytest.approx(projection.generation)
+    flat = {g: {**v, "sr": 0.3} for g, v in steady.items()}
+    assert convergence.project(flat, rule).generation is None and convergence.project(flat, rule).slowest() == "sr"
+    assert convergence.project({g: steady[g] for g in range(2, 6)}, rule) is None  # 4 generations: too few
+    narrow = {g: {"lr": 0.001, "sr": 0.001} for g in range(2, 8)}
+    assert convergence.project(narrow, rule).generation == 7 + 2
+
+
+def test_fitness_correlations_rank_each_parameter_within_the_generations_asked():
+    """Fitness that falls with sr and ignores lr: ρ = −1 for sr, near 0 for lr; trials outside the generations,
+    failed or of another generation are left out."""
+    rng = np.random.default_rng(0)
+    space = SearchSpace(fixed_iss=1.0)
+    dists = space.distributions()
+    trials = []
+    for number in range(60):
+        sr, lr = 10 ** rng.uniform(-2, 1), 10 ** rng.uniform(-2, 0)
+        generation = number // 6
+        trials.append(optuna.trial.create_trial(
+            params={"sr": sr, "lr": lr}, distributions=dists, value=-math.log10(sr) if generation < 8 else math.log10(sr),
+            user_attrs={"generation": generation}))
+    rho = convergence.fitness_correlations(trials, space, (2, 7))
+    assert rho["sr"] == (pytest.approx(-1.0), pytest.approx(0.0, abs=1e-12))
+    assert abs(rho["lr"][0]) < 0.35 and rho["lr"][1] > 0.01
+    assert convergence.fitness_correlations(trials, space, (8, 9))["sr"][0] == pytest.approx(1.0)
+    assert convergence.fitness_correlations(trials, space, (20, 30)) == {}
 
 
 @pytest.mark.parametrize("width, generations, message", [
@@ -88,6 +127,36 @@ def test_the_replay_on_the_paper_study_stops_at_generation_32_and_copies_the_stu
                 "--copy-to", copy)
     assert again.returncode == 2
     assert again.stderr.strip().endswith(f"already holds a study '{PAPER_STUDY}'; give --copy-to another storage")
+
+
+def test_a_study_cut_before_it_converged_is_projected_to_converge_near_where_it_did(tmp_path):
+    """The paper study cut at the first generation whose spreads are all below 0.02 decades (generation 21): the
+    projection of the default rule from there lands near generation 32, where the whole study converged."""
+    cut = f"journal:{tmp_path / 'cut.log'}"
+    run = cli("convergence", "--study", PAPER_STUDY, "--storage", f"journal:{PAPER}", "--out", tmp_path / "a",
+              "--copy-to", cut, "--converged-width", "0.02", "--converged-generations", "1")
+    assert run.returncode == 0 and "converged at generation 21:" in run.stdout, run.stdout + run.stderr
+    run = cli("convergence", "--study", PAPER_STUDY, "--storage", cut, "--out", tmp_path / "b")
+    assert run.returncode == 0, run.stderr
+    assert f"study '{PAPER_STUDY}' has not converged by the rule" in run.stdout
+    said = re.search(r"at the rates of generations 12–21 \((\w+)'s spread shrinks slowest, × (0\.\d+) a generation\), "
+                     r"the rule would hold at about generation (\d+), ([\d,]+) trials: within the study's limit of "
+                     r"900 trials", run.stdout)
+    assert said, run.stdout
+    generation = int(said.group(3))
+    assert 25 <= generation <= 36 and int(said.group(4).replace(",", "")) == (generation + 1) * 6
+    projection = json.loads((tmp_path / "b" / "convergence.json").read_text())["projection"]
+    assert (projection["window"], projection["generation"], projection["trial_limit"]) == ([12, 21], generation, 900)
+    rho = json.loads((tmp_path / "b" / "convergence.json").read_text())["fitness_correlations"]
+    assert set(rho) == {"lr", "sr"} and all(-1 <= v["rho"] <= 1 and 0 <= v["p"] <= 1 for v in rho.values())
+    assert "fitness against each parameter over generations 12–21 (Spearman's ρ): lr " in run.stdout
+    factor = projection["factors"][said.group(1)]
+    assert 0.7 < factor < 1 and factor == pytest.approx(float(said.group(2)), abs=5e-4)
+    load_study(cut, PAPER_STUDY).set_user_attr("converged", None)  # as if evolved without --until-converged
+    report = cli("report", "--study", PAPER_STUDY, "--storage", cut, "--out", tmp_path / "report")
+    assert report.returncode == 0, report.stderr
+    assert (f"not reached; at the rates of generations 12–21 it would hold at about generation {generation}"
+            in (tmp_path / "report" / "report.html").read_text())
 
 
 def _evolve(tmp_path, *extra):

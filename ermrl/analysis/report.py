@@ -325,6 +325,12 @@ def spread_section(study: optuna.Study, record: dict, run_dir: Path) -> list[str
     verdict = convergence.judge(study, space, record["popsize"], rule, trials)
     where = ("not reached" if verdict.generation is None else
              f"generation {verdict.generation}, {verdict.trials} of {len(completed(study))} completed trials")
+    projection = convergence.project(verdict.spread, rule) if verdict.generation is None else None
+    if projection is not None:
+        first, last = projection.window
+        where += (f"; at the rates of generations {first}–{last} it would hold at about generation "
+                  f"{math.ceil(projection.generation):,}" if projection.generation is not None else
+                  f"; the spread of {projection.slowest()} did not shrink over generations {first}–{last}")
     fig = spread.figure(dists, rule, verdict.generation, f"{study.study_name}: Φ spread per generation",
                         run_dir / "phi_spread.png")
     return ["<h2>&Phi; spread per generation</h2>",

@@ -3,6 +3,8 @@ replayed on the study's stored search distributions; with ``--copy-to``, the stu
 
 from __future__ import annotations
 
+import math
+
 from ermrl.cli import common, options
 from ermrl.errors import ConfigError
 
@@ -13,7 +15,10 @@ def add_parser(sub, formatter) -> None:
                                    "it in the study), write its spread per generation (OUT/convergence.csv, "
                                    "OUT/convergence.png) and say at which generation the stopping rule of `ermrl "
                                    "evolve --until-converged` holds, with the trials that far and the compute they "
-                                   "are of all the study's trials (OUT/convergence.json). --copy-to writes the study "
+                                   "are of all the study's trials (OUT/convergence.json). On a study that has not "
+                                   "converged it says where the rule would hold if each spread kept shrinking at "
+                                   "its rate of the later half of the generations, and Spearman's ρ of fitness "
+                                   "against each parameter there. --copy-to writes the study "
                                    "as the rule would have left it (its trials up to that generation) to another "
                                    "storage, where `ermrl select` and `ermrl test` run as on any study.",
                        formatter_class=formatter)
@@ -63,6 +68,9 @@ def cmd_convergence(args) -> int:
     if verdict.generation is None:
         print(f"study {args.study!r} has not converged by the rule ({rule.describe()}) in its {max(dists)} "
               f"generations ({total} trials)")
+        summary["projection"] = _projection(convergence.project(verdict.spread, rule), config)
+        if summary["projection"] is not None:
+            summary["fitness_correlations"] = _correlations(trials, config, summary["projection"]["window"])
     else:
         shift = spread.shift(dists, verdict.generation)
         summary["mean_shift_decades"] = shift
@@ -83,6 +91,39 @@ def cmd_convergence(args) -> int:
         print(f"copied {len(kept)} trials (generations 0–{verdict.generation}) to study {args.study!r} in "
               f"{args.copy_to}; next: ermrl select --study {args.study} --storage {args.copy_to}")
     return 0
+
+
+def _projection(projection, config) -> dict | None:
+    """Prints where the rule would hold at the spreads' recent rates, against the study's trial limit; returns it
+    for convergence.json."""
+    if projection is None:
+        return None
+    first, last = projection.window
+    slowest = projection.slowest()
+    rate = f"{slowest}'s spread shrinks slowest, × {projection.factors[slowest]:.3f} a generation"
+    if projection.generation is None:
+        print(f"  over generations {first}–{last}, {slowest}'s spread did not shrink (× "
+              f"{projection.factors[slowest]:.3f} a generation): no projection of the stop")
+        return {"window": [first, last], "factors": projection.factors, "generation": None, "trials": None}
+    generation = math.ceil(projection.generation)
+    trials = (generation + 1) * config.generation_size
+    limit = (f"beyond the study's limit of {config.trials:,} trials, where it stops unconverged" if trials > config.trials
+             else f"within the study's limit of {config.trials:,} trials")
+    print(f"  at the rates of generations {first}–{last} ({rate}), the rule would hold at about generation "
+          f"{generation:,}, {trials:,} trials: {limit} (a log-linear fit per parameter; a trend, not a promise)")
+    return {"window": [first, last], "factors": projection.factors, "generation": generation, "trials": trials,
+            "trial_limit": config.trials}
+
+
+def _correlations(trials, config, window) -> dict:
+    """Prints Spearman's ρ of fitness against each parameter over the projection's generations; returns them."""
+    from ermrl.evolution import convergence
+
+    rho = convergence.fitness_correlations(trials, config.space, tuple(window))
+    if rho:
+        cells = ", ".join(f"{name} {r:+.2f} (p {p:.2g})" for name, (r, p) in rho.items())
+        print(f"  fitness against each parameter over generations {window[0]}–{window[1]} (Spearman's ρ): {cells}")
+    return {name: {"rho": r, "p": p} for name, (r, p) in rho.items()}
 
 
 def _check_copy_target(url: str, name: str) -> None:
