@@ -19,6 +19,7 @@ from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study
 
 from cli_runs import ermrl as cli
+from cli_runs import script
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 PAPER = Path(__file__).resolve().parents[1] / "docs" / "data" / "partial-observability-paper" / "studies.log"
@@ -157,6 +158,29 @@ def test_a_study_cut_before_it_converged_is_projected_to_converge_near_where_it_
     assert report.returncode == 0, report.stderr
     assert (f"not reached; at the rates of generations 12–21 it would hold at about generation {generation}"
             in (tmp_path / "report" / "report.html").read_text())
+
+
+def test_a_study_copied_as_it_stood_after_a_generation_selects_and_replays_like_the_original(tmp_path):
+    """paper/study_so_far.py: the trials of generations 0..G of the paper study, its record and CMA-ES optimizers,
+    in a new journal; an unfinished generation and a target already holding the study are refused."""
+    copy = f"journal:{tmp_path / 'so-far.log'}"
+    tool = Path(__file__).resolve().parents[1] / "paper" / "study_so_far.py"
+    run = script(tool, "--study", PAPER_STUDY, "--storage", f"journal:{PAPER}", "--generation", "10", "--to", copy)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == f"copied 66 trials (66 complete) of generations 0–10 of '{PAPER_STUDY}' to {copy}"
+    copied, original = load_study(copy, PAPER_STUDY), load_study(f"journal:{PAPER}", PAPER_STUDY)
+    assert copied.user_attrs["ermrl"] == original.user_attrs["ermrl"]
+    assert [(t.params, t.value) for t in copied.trials] == [(t.params, t.value) for t in original.trials[:66]]
+    space = SearchSpace(fixed_iss=1.0)
+    assert convergence.spreads(copied.trials, space) == {g: v for g, v in convergence.spreads(original.trials, space).items()
+                                                         if g <= 10}
+    again = script(tool, "--study", PAPER_STUDY, "--storage", f"journal:{PAPER}", "--generation", "10", "--to", copy)
+    assert again.returncode == 2 and again.stderr.strip().endswith(
+        f"{copy} already holds a study '{PAPER_STUDY}'; give --to another storage")
+    late = script(tool, "--study", PAPER_STUDY, "--storage", f"journal:{PAPER}", "--generation", "150", "--to", copy)
+    assert late.returncode == 2 and late.stderr.strip().endswith(
+        "generation 150 of 'partial-observability-paper-cartpole-1res' has 0 of its 6 trials complete; give a "
+        "generation the study has finished")
 
 
 def _evolve(tmp_path, *extra):

@@ -143,17 +143,8 @@ def _check_copy_target(url: str, name: str) -> None:
 
 
 def _copy(study, trials, url: str, rule, verdict) -> None:
-    """A new study ``study.study_name`` in ``url`` with ``study``'s ermrl record and ``trials`` (their params,
-    values, states and attributes, the sampler's stored optimizers included), marked converged by ``rule``."""
-    import optuna
-
+    """A new study ``study.study_name`` in ``url`` with ``study``'s record and ``trials``, marked converged by ``rule``."""
     from ermrl.evolution import convergence
-    from ermrl.evolution.study import ATTR, make_storage
+    from ermrl.evolution.study import copy_trials
 
-    copy = optuna.create_study(storage=make_storage(url, heartbeat=None), study_name=study.study_name,
-                               direction="maximize")
-    for key in (ATTR, "software"):
-        if key in study.user_attrs:
-            copy.set_user_attr(key, study.user_attrs[key])
-    copy.add_trials(trials)
-    convergence.record(copy, rule, verdict)
+    convergence.record(copy_trials(study, trials, url), rule, verdict)

@@ -326,3 +326,17 @@ def _comparable(record: dict) -> str:
     if isinstance(keep.get("train"), dict):
         keep["train"] = {k: v for k, v in keep["train"].items() if k not in ("env_workers", "env_threads")}
     return json.dumps(keep, sort_keys=True, default=str)
+
+
+def copy_trials(study: optuna.Study, trials: list, url: str) -> optuna.Study:
+    """A new study named as ``study`` in ``url`` with ``study``'s ermrl record and software versions and ``trials``
+    (FrozenTrials: their params, values, states and attributes, the CMA-ES optimizers Optuna stored included), so
+    that ``ermrl select`` and ``ermrl test`` run on it as on the original. ``url`` must not hold that study."""
+    copy = optuna.create_study(storage=make_storage(url, heartbeat=None), study_name=study.study_name,
+                               direction="maximize")
+    for key in (ATTR, "software"):
+        if key in study.user_attrs:
+            copy.set_user_attr(key, study.user_attrs[key])
+    copy.add_trials(trials)
+    return copy
+

@@ -4,7 +4,7 @@ studies at `small` and `converged`, the FFT of their agents, the HP maps (as dat
 from __future__ import annotations
 
 from ermrl.experiments.reproduction.actions import (
-    TEST10, Collect, Exists, MakeDirs, Missing, Step, compare, ermrl, experiment, step,
+    NOT_SAVED, TEST10, Collect, Exists, MakeDirs, Missing, Step, compare, ermrl, experiment, made, python, step,
 )
 
 SMALL = "docs/data/locomotion-small"
@@ -13,7 +13,7 @@ TRIO = ("ant", "halfcheetah", "swimmer")
 
 def steps() -> list[Step]:
     return [h2(), c8(), fft(), fft_early(), h3(), humanoid(), c13(), c16(), hpmap(), c11(), c11_2res(),
-            h2_converged(), h3_converged(), c8_converged()]
+            h2_converged(), h2_converged_interim(), h3_converged(), c8_converged()]
 
 
 def h2() -> Step:
@@ -27,6 +27,33 @@ def h2_converged() -> Step:
                 "trials), then selection and 10 × 1M against PPO; one study at a time, HalfCheetah first",
                 [experiment("locomotion", "converged", "--only", f"{s}-2res", TEST10)
                  for s in ("halfcheetah", "swimmer", "ant")])
+
+
+CONVERGED = "docs/data/locomotion-converged"
+HALFCHEETAH_SO_FAR = 19
+"""The last generation of the converged HalfCheetah study that ``h2_converged_interim`` selects and tests from."""
+
+
+def h2_converged_interim() -> Step:
+    d, study = f"{CONVERGED}/halfcheetah-gen{HALFCHEETAH_SO_FAR}", "locomotion-converged-halfcheetah-2res"
+    where = ("--study", study, "--storage", f"{d}/studies.log")
+    return step("h2_converged_interim", "C7", "h2_converged's HalfCheetah study ahead of its end: its trials of "
+                f"generations 0–{HALFCHEETAH_SO_FAR} copied aside (paper/study_so_far.py), the top 5 re-evaluated on "
+                "5 seeds, Φ* tested 10 × 1M against PPO (from the store), and compared with the small study's Φ*",
+                python("paper/study_so_far.py", "--study", study, "--storage", f"journal:{CONVERGED}/studies.log",
+                       "--generation", HALFCHEETAH_SO_FAR, "--to", f"journal:{d}/studies.log",
+                       skip_if=made(f"{d}/studies.log")),
+                ermrl("select", where, "--out", f"runs/{study}-gen{HALFCHEETAH_SO_FAR}", "--top", 5, "--seeds", 5,
+                      "--quiet"),
+                ermrl("test", where, "--out", d, "--seeds", 10, "--timesteps", 1000000, "--baseline-store",
+                      "docs/data/baseline-models", NOT_SAVED, skip_if=made(f"{d}/test/summary.json")),
+                compare(f"converged study, generation {HALFCHEETAH_SO_FAR}={d}/test/summary.json",
+                        f"small study={SMALL}/halfcheetah-2res/test/summary.json",
+                        "--compare", f"converged study, generation {HALFCHEETAH_SO_FAR}", "PPO (same observation)",
+                        "--compare", f"converged study, generation {HALFCHEETAH_SO_FAR}", "small study",
+                        "--title", f"HalfCheetah-v5: Φ* of the converged-scale study after {HALFCHEETAH_SO_FAR + 1} "
+                                   "generations against PPO and the small study's Φ*",
+                        "--figure", f"{d}/comparison.png", tee=f"{d}/comparison.md"))
 
 
 def h3_converged() -> Step:
