@@ -14,7 +14,7 @@ from ermrl.errors import ConfigError
 
 def requested() -> tuple[int, str | None]:
     """(CPU devices to ask JAX for, the problem with ERMRL_CPU_DEVICES or None): one per core unless the variable
-    sets a whole number >= 1."""
+    sets a whole number in 1..:func:`max_devices`."""
     cores = os.cpu_count() or 1
     raw = os.environ.get("ERMRL_CPU_DEVICES")
     if raw is None:
@@ -26,7 +26,17 @@ def requested() -> tuple[int, str | None]:
     if n < 1:
         return cores, (f"ERMRL_CPU_DEVICES must be a whole number >= 1 (the CPU devices a population is sharded "
                        f"over), got {raw!r}; unset it to use one per core ({cores})")
+    if n > max_devices(cores):
+        return cores, (f"ERMRL_CPU_DEVICES must be at most {max_devices(cores)} (4 per core, at least 8: more devices "
+                       f"than cores run no faster, and a population is padded to a multiple of them), got {raw!r}; "
+                       f"unset it to use one per core ({cores})")
     return n, None
+
+
+def max_devices(cores: int) -> int:
+    """The most CPU devices ERMRL_CPU_DEVICES may ask for on ``cores`` cores: 4 per core, at least 8 (enough to
+    try a GPU node's sharding on a laptop)."""
+    return max(8, 4 * cores)
 
 
 def setup() -> None:

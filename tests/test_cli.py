@@ -96,6 +96,20 @@ def test_a_bad_cpu_device_count_is_refused_before_any_work(tmp_path, value):
     assert not (tmp_path / "run").exists()
 
 
+def test_a_cpu_device_count_far_above_the_cores_is_refused(tmp_path):
+    """1000 devices on a few cores would pad every population to a multiple of 1000 agents."""
+    import os
+
+    r = ermrl_process("train", "--env", "CartPole-v1", "--timesteps", "2048", "--out", tmp_path / "run",
+                      env={"ERMRL_CPU_DEVICES": "1000"})
+    cores = os.cpu_count() or 1
+    assert r.returncode == 2 and r.stderr == (
+        f"ermrl train: error: ERMRL_CPU_DEVICES must be at most {max(8, 4 * cores)} (4 per core, at least 8: more "
+        f"devices than cores run no faster, and a population is padded to a multiple of them), got '1000'; unset it "
+        f"to use one per core ({cores})\n"), r.stderr
+    assert not (tmp_path / "run").exists()
+
+
 def test_output_paths_are_checked_before_any_training(tmp_path):
     """An --out that is a file, lies under a file, or in a folder that cannot be written is refused in one line
     before training (it used to train to the end and then die with a traceback, losing the results)."""
