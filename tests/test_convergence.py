@@ -156,7 +156,8 @@ def test_a_study_cut_before_it_converged_is_projected_to_converge_near_where_it_
     load_study(cut, PAPER_STUDY).set_user_attr("converged", None)  # as if evolved without --until-converged
     report = cli("report", "--study", PAPER_STUDY, "--storage", cut, "--out", tmp_path / "report")
     assert report.returncode == 0, report.stderr
-    assert (f"not reached; at the rates of generations 12–21 it would hold at about generation {generation}"
+    assert (f"not reached; at the rates of generations 12–21 ({said.group(1)}&#x27;s spread shrinks slowest, × "
+            f"{said.group(2)} a generation), the rule would hold at about generation {generation}"
             in (tmp_path / "report" / "report.html").read_text())
 
 
@@ -209,6 +210,22 @@ def test_evolve_until_converged_stops_records_why_and_a_rerun_does_nothing(tmp_p
     page = (tmp_path / "s" / "report.html").read_text()
     assert "stopped: CMA-ES converged at generation 2 (6 trials)" in page and 'alt="Φ spread per generation"' in page
     assert (tmp_path / "s" / "phi_spread.png").stat().st_size > 10_000
+
+
+def test_evolve_until_converged_logs_each_generations_spread_and_the_projected_stop(tmp_path):
+    """Not converged after 8 generations: one line per generation sampled from a stored distribution, logged as the
+    next one is claimed (2 to 6),
+    the projection from the fifth on."""
+    run = _evolve(tmp_path, "--until-converged", "--trials", "16")
+    assert run.returncode == 0, run.stderr
+    lines = [line for line in run.stdout.splitlines() if re.match(r"generation \d+: widest spread", line)]
+    assert [int(line.split()[1].rstrip(":")) for line in lines] == [2, 3, 4, 5, 6], run.stdout
+    assert all(re.fullmatch(r"generation \d: widest spread [\d.e-]+ decades \((lr|sr)\), 0.01 to converge", line)
+               for line in lines[:3]), lines
+    assert re.fullmatch(r"generation 6: widest spread [\d.e-]+ decades \((lr|sr)\), 0.01 to converge; (at the rates "
+                        r"of generations 2–6 \((lr|sr)'s spread shrinks slowest, × [\d.]+ a generation\), the rule "
+                        r"would hold at about generation [\d,]+|over generations 2–6, (lr|sr)'s spread did not shrink "
+                        r"\(× [\d.]+ a generation\))", lines[4]), lines[4]
 
 
 def test_until_converged_needs_cmaes_and_nothing_is_written(tmp_path):

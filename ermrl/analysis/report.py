@@ -327,16 +327,13 @@ def spread_section(study: optuna.Study, record: dict, run_dir: Path) -> list[str
              f"generation {verdict.generation}, {verdict.trials} of {len(completed(study))} completed trials")
     projection = convergence.project(verdict.spread, rule) if verdict.generation is None else None
     if projection is not None:
-        first, last = projection.window
-        where += (f"; at the rates of generations {first}–{last} it would hold at about generation "
-                  f"{math.ceil(projection.generation):,}" if projection.generation is not None else
-                  f"; the spread of {projection.slowest()} did not shrink over generations {first}–{last}")
+        where += f"; {projection.describe()}"
     fig = spread.figure(dists, rule, verdict.generation, f"{study.study_name}: Φ spread per generation",
                         run_dir / "phi_spread.png")
     return ["<h2>&Phi; spread per generation</h2>",
             f"<p>the standard deviation, in decades, of the distribution CMA-ES sampled each generation from; the "
             f"rule {'the study stopped by' if stopped else 'of <code>--until-converged</code>'} ({html.escape(rule.describe())}): "
-            f"{where}</p>", _img(fig, "Φ spread per generation")]
+            f"{html.escape(where)}</p>", _img(fig, "Φ spread per generation")]
 
 
 def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | None = None) -> Path:

@@ -98,21 +98,18 @@ def _projection(projection, config) -> dict | None:
     for convergence.json."""
     if projection is None:
         return None
-    first, last = projection.window
-    slowest = projection.slowest()
-    rate = f"{slowest}'s spread shrinks slowest, × {projection.factors[slowest]:.3f} a generation"
+    summary = {"window": list(projection.window), "factors": projection.factors, "generation": None, "trials": None,
+               "trial_limit": config.trials}
     if projection.generation is None:
-        print(f"  over generations {first}–{last}, {slowest}'s spread did not shrink (× "
-              f"{projection.factors[slowest]:.3f} a generation): no projection of the stop")
-        return {"window": [first, last], "factors": projection.factors, "generation": None, "trials": None}
+        print(f"  {projection.describe()}: no projection of the stop")
+        return summary
     generation = math.ceil(projection.generation)
     trials = (generation + 1) * config.generation_size
     limit = (f"beyond the study's limit of {config.trials:,} trials, where it stops unconverged" if trials > config.trials
              else f"within the study's limit of {config.trials:,} trials")
-    print(f"  at the rates of generations {first}–{last} ({rate}), the rule would hold at about generation "
-          f"{generation:,}, {trials:,} trials: {limit} (a log-linear fit per parameter; a trend, not a promise)")
-    return {"window": [first, last], "factors": projection.factors, "generation": generation, "trials": trials,
-            "trial_limit": config.trials}
+    print(f"  {projection.describe()}, {trials:,} trials: {limit} (a log-linear fit per parameter; a trend, not a "
+          "promise)")
+    return {**summary, "generation": generation, "trials": trials}
 
 
 def _correlations(trials, config, window) -> dict:

@@ -139,6 +139,18 @@ class Projection:
         """The parameter whose spread shrinks slowest."""
         return max(self.factors, key=self.factors.get)
 
+    def describe(self) -> str:
+        """"at the rates of generations 11–19 (sr_1's spread shrinks slowest, × 0.997 a generation), the rule would
+        hold at about generation 1,467", or, when a spread is not shrinking, "over generations 11–20, iss_1's
+        spread did not shrink (× 1.003 a generation)"."""
+        (first, last), name = self.window, self.slowest()
+        if self.generation is None:
+            return (f"over generations {first}–{last}, {name}'s spread did not shrink (× {self.factors[name]:.3f} a "
+                    "generation)")
+        return (f"at the rates of generations {first}–{last} ({name}'s spread shrinks slowest, × "
+                f"{self.factors[name]:.3f} a generation), the rule would hold at about generation "
+                f"{math.ceil(self.generation):,}")
+
 
 MIN_WINDOW = 5
 """The fewest generations a projection is fitted on."""

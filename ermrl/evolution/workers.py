@@ -135,6 +135,7 @@ class Worker:
                                                                               worker.grace_period)
         self.heartbeat = Heartbeat(study, self.interval_s, log)
         self._warned_index = False
+        self._spread_logged: int | None = None
         self.terminated = self._deferring = False
 
     def __enter__(self) -> "Worker":
@@ -227,11 +228,22 @@ class Worker:
             return False
         verdict = convergence.judge(self.study, self.config.space, self.config.generation_size, rule, trials)
         if verdict.generation is None:
+            self._log_spread(verdict, rule)
             return False
         if convergence.recorded(self.study, rule) is None:
             convergence.record(self.study, rule, verdict)
             self.log(f"converged at generation {verdict.generation} ({verdict.trials} trials): {rule.describe()}")
         return True
+
+    def _log_spread(self, verdict: convergence.Verdict, rule: convergence.Convergence) -> None:
+        """Logs, once per generation sampled from a new distribution, its widest spread and the projected stop."""
+        if not verdict.spread or max(verdict.spread) == self._spread_logged:
+            return
+        self._spread_logged = latest = max(verdict.spread)
+        name, widest = max(verdict.spread[latest].items(), key=lambda kv: kv[1])
+        projection = convergence.project(verdict.spread, rule)
+        self.log(f"generation {latest}: widest spread {widest:.3g} decades ({name}), {rule.width:g} to converge"
+                 + ("" if projection is None else f"; {projection.describe()}"))
 
     def _trials(self) -> list[FrozenTrial]:
         """The study's trials, after failing those of workers that are gone."""
