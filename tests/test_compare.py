@@ -5,6 +5,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from ermrl import storage
 from ermrl.analysis import variants
@@ -212,3 +213,31 @@ def test_a_figure_path_that_cannot_be_written_is_refused_before_any_work(tmp_pat
     done = _run(f"a={summary}", "--figure", tmp_path / "file" / "fig.png")
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.startswith("ermrl compare: error: --figure ") and done.stderr.count("\n") == 1
+
+
+def test_a_test_phase_run_without_auc_steps_gets_its_early_auc_from_its_curves():
+    """The converged HalfCheetah study's test phase ran without ``auc_steps``; its PPO model is the baseline store's,
+    the same as the small study's test phase, which computed its AUC over 0–300k when it ran: read from the curves,
+    the two agree, and the ER-MRL row gets one too."""
+    late = DATA / "locomotion-converged" / "halfcheetah-gen19" / "test" / "summary.json"
+    assert all(r.get("auc_early_mean") is None for r in json.loads(late.read_text()))
+    ermrl_row, (ppo,) = variants.read_rows(late)
+    _, (ppo_then,) = variants.read_rows(DATA / "locomotion-small" / "halfcheetah-2res" / "test" / "summary.json")
+    assert ppo["auc_early_mean"] == pytest.approx(ppo_then["auc_early_mean"], rel=1e-6)  # curves.csv rounds
+    assert 0 < ermrl_row["auc_early_mean"] < ermrl_row["auc_mean"]
+    assert variants.read_rows(late, auc=False)[0].get("auc_early_mean") is None
+
+
+def test_each_comparison_also_pairs_the_seeds_early_auc():
+    """Per seed, the mean of the curve over 0–300k from curves.csv: its paired mean difference is the difference of
+    the test phase's own auc_early_mean (small study: 269.6 − 20.2), and every seed is paired."""
+    small = DATA / "locomotion-small" / "halfcheetah-2res" / "test" / "summary.json"
+    rows = json.loads(small.read_text())
+    by_seed = variants.early_auc_by_seed([small], rows[0]["model"])
+    assert sorted(by_seed) == list(range(1000, 1010))
+    assert np.mean(list(by_seed.values())) == pytest.approx(rows[0]["auc_early_mean"], rel=1e-6)
+    out = variants.table({"small": [small]}, [("small", "PPO (same observation)")])
+    line = next(x for x in out.splitlines() if "AUC 0–300k: paired" in x)
+    assert line.startswith("  - AUC 0–300k: paired small − PPO (same observation) over 10 seeds: +249 [")
+    assert line.endswith("10 of 10 above")
+    assert variants.early_auc_by_seed([small], "no such model") == {}

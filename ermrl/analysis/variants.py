@@ -39,10 +39,19 @@ def read_rows(path: Path, auc: bool = True) -> tuple[dict, list[dict]]:
         return {"model": None, "kind": _run_kind(path), "scores": scores,
                 "auc_early_mean": _early_auc(path) if auc else None}, []
     rows = [{**r, "model": current(r["model"])} for r in rows]  # as read_curves_csv names them: older labels too
+    if auc and any(r.get("auc_early_mean") is None for r in rows):
+        rows = _with_early_auc(path, rows)
     ermrl = [r for r in rows if r["kind"] == "ER-MRL"]
     if len(ermrl) != 1:
         raise ValueError(f"{path} has {len(ermrl)} ER-MRL rows; give a test phase of one learning rate")
     return ermrl[0], [r for r in rows if r["kind"] == "PPO"]
+
+
+def _with_early_auc(summary: Path, rows: list[dict]) -> list[dict]:
+    """A test phase's rows, those without an AUC over the first 300k steps (a test phase run without
+    ``auc_steps``) given it from the ``curves.csv`` beside the summary, as the test phase computes it."""
+    return [row if row.get("auc_early_mean") is not None else {**row, "auc_early_mean": _early_auc(summary, model=row["model"])}
+            for row in rows]
 
 
 def _run_kind(summary: Path) -> str:
@@ -101,17 +110,31 @@ def _train_curves(summaries: tuple[Path, ...]) -> tuple | None:
     return read[0][0], np.concatenate([values for _, values in read])
 
 
-def _early_auc(*summaries: Path, steps: int = 300_000) -> float | None:
-    """The mean over seeds of ``ermrl train`` runs' learning curves over their first ``steps`` (as a test phase's
-    ``auc_early_mean``), from the ``curves.csv`` beside each summary; None without one."""
-    import numpy as np
+def _early_auc(*summaries: Path, model: str | None = None) -> float | None:
+    """The mean over seeds of :func:`early_auc_by_seed` (a test phase's ``auc_early_mean``); None without curves."""
+    by_seed = early_auc_by_seed(list(summaries), model)
+    return sum(by_seed.values()) / len(by_seed) if by_seed else None
 
-    curve = _train_curves(summaries)
-    if curve is None:
-        return None
-    timesteps, values = curve
-    with np.errstate(all="ignore"):
-        return float(np.nanmean(np.nanmean(values[:, timesteps <= steps], axis=1)))
+
+def early_auc_by_seed(paths: list[Path], model: str | None, steps: int = 300_000) -> dict[int, float]:
+    """{seed: the mean of its learning curve over the first ``steps``} of ``model`` (None: the one model of an
+    ``ermrl train`` run), read from the ``curves.csv`` beside each summary (as a test phase's ``auc_early_mean``
+    averages them); {} when a curves.csv is missing or lacks the model."""
+    import csv
+
+    from ermrl.model_labels import current
+
+    sums: dict[int, list[float]] = {}
+    for summary in paths:
+        path = summary.parent / "curves.csv"
+        if not path.is_file():
+            return {}
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                if (model is None or current(row["model"]) == model) and int(row["timestep"]) <= steps \
+                        and row["mean_return_100"]:
+                    sums.setdefault(int(row["seed"]), []).append(float(row["mean_return_100"]))
+    return {seed: sum(v) / len(v) for seed, v in sums.items()}
 
 
 def per_seed(row: dict) -> dict[int, float]:
@@ -136,16 +159,19 @@ def table(variants: dict[str, list[Path]], comparisons: list[tuple[str, str]]) -
         auc = "" if row.get("auc_early_mean") is None else f"{row['auc_early_mean']:.1f}"
         return f"| {name} | {s.n} | {s.mean:.1f} ± {s.std:.1f} | {format_ci(s.iqm, s.iqm_low, s.iqm_high)} | {auc} |"
 
-    ppo_rows = None
+    ppo_rows, aucs = None, {}
     for name, paths in variants.items():
         ermrl, ppo = read_variant(paths)
         scores[name] = per_seed(ermrl)
+        aucs[name] = early_auc_by_seed(paths, ermrl["model"])
         lines.append(line(f"{ermrl['kind']}, {name}", ermrl))
-        ppo_rows = ppo if ppo_rows is None else ppo_rows
+        if ppo_rows is None:
+            ppo_rows, ppo_paths = ppo, paths
     lines += [line(r["model"], r) for r in ppo_rows or []]
     lines.append("")
     for r in ppo_rows or []:  # a PPO row of the first test phase is comparable by its model name
         scores.setdefault(r["model"], per_seed(r))
+        aucs.setdefault(r["model"], early_auc_by_seed(ppo_paths, r["model"]))
     for a, b in comparisons:
         for name in (a, b):
             if name not in scores:
@@ -156,6 +182,10 @@ def table(variants: dict[str, list[Path]], comparisons: list[tuple[str, str]]) -
         shared = sorted(set(scores[a]) & set(scores[b]))
         diff = paired_difference([scores[a][s] for s in shared], [scores[b][s] for s in shared])
         lines.append(f"- P({a} > {b}) = {format_ci(*p, digits=2)}; paired {a} − {b} over {len(shared)} seeds: {diff}")
+        early = sorted(set(aucs[a]) & set(aucs[b]))
+        if early:
+            diff = paired_difference([aucs[a][s] for s in early], [aucs[b][s] for s in early])
+            lines.append(f"  - AUC 0–300k: paired {a} − {b} over {len(early)} seeds: {diff}")
     return "\n".join(lines) + "\n"
 
 

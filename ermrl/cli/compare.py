@@ -19,7 +19,9 @@ def add_parser(sub, formatter) -> None:
                                    "Markdown table: each variant's ER-MRL row (n, mean ± std, IQM [95%% CI], AUC over "
                                    "the first 300k steps), then the first test phase's PPO rows; then for each "
                                    "--compare A B, P(A > B) with its 95%% CI (rliable) and the paired difference "
-                                   "A − B over the shared seeds (BCa CI, Wilcoxon p). --figure draws every variant's "
+                                   "A − B over the shared seeds (BCa CI, Wilcoxon p) of the final score and, where "
+                                   "both have a curves.csv beside their summary, of the AUC over the first 300k "
+                                   "steps. --figure draws every variant's "
                                    "learning curve and the PPO curves, from the curves.csv beside each summary.",
                        formatter_class=formatter)
     p.add_argument("variants", nargs="+", type=_variant, metavar="LABEL=SUMMARY.json",
