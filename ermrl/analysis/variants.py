@@ -50,8 +50,8 @@ def read_rows(path: Path, auc: bool = True) -> tuple[dict, list[dict]]:
 def _with_early_auc(summary: Path, rows: list[dict]) -> list[dict]:
     """A test phase's rows, those without an AUC over the first 300k steps (a test phase run without
     ``auc_steps``) given it from the ``curves.csv`` beside the summary, as the test phase computes it."""
-    return [row if row.get("auc_early_mean") is not None else {**row, "auc_early_mean": _early_auc(summary, model=row["model"])}
-            for row in rows]
+    return [row if row.get("auc_early_mean") is not None
+            else {**row, "auc_early_mean": _early_auc(summary, model=row["model"])} for row in rows]
 
 
 def _run_kind(summary: Path) -> str:
