@@ -144,8 +144,8 @@ def _run(args) -> int:
                   "trials, as the paper's 900-trial CartPoleNoVel study did")
             if any(p.spec.reservoirs > 1 for p in plans):
                 print("  (a study of 2 or more reservoirs searches 6 or more parameters and may not converge before "
-                      "its trial limit: the 2-reservoir HalfCheetah-v5 study, its fitness flat across the Φ it "
-                      "samples, is projected to reach it unconverged; `ermrl convergence` projects a running study)")
+                      "its trial limit: the 2-reservoir HalfCheetah-v5 study, its fitness nearly flat across the "
+                      "Φ it samples, is projected to reach it unconverged; `ermrl convergence` projects a running study)")
         if seconds >= 60 and (note := busy_note()):
             print(note)
 
