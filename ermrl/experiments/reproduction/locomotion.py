@@ -30,30 +30,30 @@ def h2_converged() -> Step:
 
 
 CONVERGED = "docs/data/locomotion-converged"
-HALFCHEETAH_SO_FAR = 19
-"""The last generation of the converged HalfCheetah study that ``h2_converged_interim`` selects and tests from."""
+SO_FAR = {"halfcheetah": 19}
+"""{task: the last generation of its converged-scale C7 study that ``h2_converged_interim`` selects and tests
+from}: a study ahead of its end, while it runs on (add a task once its study has about 20 generations)."""
 
 
 def h2_converged_interim() -> Step:
-    d, study = f"{CONVERGED}/halfcheetah-gen{HALFCHEETAH_SO_FAR}", "locomotion-converged-halfcheetah-2res"
-    where = ("--study", study, "--storage", f"{d}/studies.log")
-    return step("h2_converged_interim", "C7", "h2_converged's HalfCheetah study ahead of its end: its trials of "
-                f"generations 0–{HALFCHEETAH_SO_FAR} copied aside (paper/study_so_far.py), the top 5 re-evaluated on "
-                "5 seeds, Φ* tested 10 × 1M against PPO (from the store), and compared with the small study's Φ*",
-                python("paper/study_so_far.py", "--study", study, "--storage", f"journal:{CONVERGED}/studies.log",
-                       "--generation", HALFCHEETAH_SO_FAR, "--to", f"journal:{d}/studies.log",
-                       skip_if=made(f"{d}/studies.log")),
-                ermrl("select", where, "--out", f"runs/{study}-gen{HALFCHEETAH_SO_FAR}", "--top", 5, "--seeds", 5,
-                      "--quiet"),
-                ermrl("test", where, "--out", d, "--seeds", 10, "--timesteps", 1000000, "--auc-steps", 300000,
-                      "--baseline-store", "docs/data/baseline-models", NOT_SAVED, skip_if=made(f"{d}/test/summary.json")),
-                compare(f"converged study, generation {HALFCHEETAH_SO_FAR}={d}/test/summary.json",
-                        f"small study={SMALL}/halfcheetah-2res/test/summary.json",
-                        "--compare", f"converged study, generation {HALFCHEETAH_SO_FAR}", "PPO (same observation)",
-                        "--compare", f"converged study, generation {HALFCHEETAH_SO_FAR}", "small study",
-                        "--title", f"HalfCheetah-v5: Φ* of the converged-scale study after {HALFCHEETAH_SO_FAR + 1} "
-                                   "generations against PPO and the small study's Φ*",
-                        "--figure", f"{d}/comparison.png", tee=f"{d}/comparison.md"))
+    actions = []
+    for task, generation in SO_FAR.items():
+        d, study = f"{CONVERGED}/{task}-gen{generation}", f"locomotion-converged-{task}-2res"
+        where, label = ("--study", study, "--storage", f"{d}/studies.log"), f"converged study, generation {generation}"
+        actions += [
+            python("paper/study_so_far.py", "--study", study, "--storage", f"journal:{CONVERGED}/studies.log",
+                   "--generation", generation, "--to", f"journal:{d}/studies.log", skip_if=made(f"{d}/studies.log")),
+            ermrl("select", where, "--out", f"runs/{study}-gen{generation}", "--top", 5, "--seeds", 5, "--quiet"),
+            ermrl("test", where, "--out", d, "--seeds", 10, "--timesteps", 1000000, "--auc-steps", 300000,
+                  "--baseline-store", "docs/data/baseline-models", NOT_SAVED, skip_if=made(f"{d}/test/summary.json")),
+            compare(f"{label}={d}/test/summary.json", f"small study={SMALL}/{task}-2res/test/summary.json",
+                    "--compare", label, "PPO (same observation)", "--compare", label, "small study",
+                    "--title", f"Φ* after {generation + 1} CMA-ES generations",
+                    "--figure", f"{d}/comparison.png", tee=f"{d}/comparison.md")]
+    return step("h2_converged_interim", "C7", "h2_converged's studies ahead of their end (HalfCheetah after "
+                "generation 19): each study's trials up to a generation copied aside (paper/study_so_far.py), the "
+                "top 5 re-evaluated on 5 seeds, Φ* tested 10 × 1M against PPO (from the store), and compared with "
+                "the small study's Φ*", actions)
 
 
 def h3_converged() -> Step:
