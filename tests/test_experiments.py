@@ -309,3 +309,45 @@ def test_select_says_when_trials_tie_at_its_cut(tmp_path):
     r = cli("select", "--study", "ties", "--storage", str(journal), "--out", str(tmp_path / "run"), "--top", "4",
             "--seeds", "1", "--quiet")
     assert r.returncode == 0 and not r.stdout.startswith("note:"), r.stdout
+
+
+def test_an_experiment_stopped_by_convergence_logs_each_generations_spread(tmp_path):
+    """A scale with a convergence rule (as `converged`) logs, under its study, the widest Φ spread of each
+    generation sampled from CMA-ES's distribution, as `ermrl evolve --until-converged` does."""
+    import dataclasses
+    import re
+
+    from ermrl.evolution.convergence import Convergence
+
+    scale = dataclasses.replace(registry.get_scale("smoke"), trials=10, until_converged=Convergence())
+    first = registry.get("partial-observability").studies[0].name
+    lines = []
+    runner.run_experiment(registry.get("partial-observability"), scale, tmp_path, log=lines.append,
+                          baselines_table=tmp_path / "baselines.json", only=(first,))
+    spread = [line for line in lines if re.match(r" {4}generation \d+: widest spread", line)]
+    assert [int(line.split()[1].rstrip(":")) for line in spread] == [2, 3], lines
+    assert all(line.endswith("0.01 to converge") for line in spread), spread
+
+
+def test_the_converged_scale_estimates_the_trial_limit_and_the_typical_convergence(tmp_path):
+    """`experiment run --scale converged` prints the time to every study's trial limit, the likelier time if each
+    converges after CONVERGED_TRIALS trials, and for several reservoirs that they may not converge."""
+    from ermrl.cli.experiment import estimate_lines
+
+    def lines(scale: str, only: str, done: int) -> tuple[list[str], float]:
+        plans = [p for p in runner.plan(registry.get("locomotion"), registry.get_scale(scale), tmp_path)
+                 if p.spec.name == only]
+        return estimate_lines(plans, registry.get_scale(scale), {plans[0].study: done}, {}, {plans[0].study}, None,
+                              runner.TestBudget(), None)
+
+    (limit, typical, caveat), likelier = lines("converged", "ant-2res", 27)
+    to_limit = int(limit.split()[2])
+    assert limit == (f"estimated time: {to_limit} min (rough: nominal throughput, 27 trials and 0 test phases "
+                     "already done) if every study runs to its trial limit")
+    assert typical == (f"  about {likelier / 60:.0f} min if each study converges after about "
+                       f"{registry.CONVERGED_TRIALS} trials, as the paper's 900-trial CartPoleNoVel study did")
+    assert 0 < likelier / 60 < to_limit / 3  # 173 of 873 trials left, and the same selection and test phases
+    assert caveat.startswith("  (a study of 2 or more reservoirs searches 6 or more parameters and may not converge")
+    assert len(lines("converged", "ant-1res", 0)[0]) == 2  # one reservoir: no caveat
+    paper, _ = lines("paper", "ant-2res", 27)  # a scale without convergence: the one line, no trial-limit clause
+    assert len(paper) == 1 and paper[0].endswith("already done)")

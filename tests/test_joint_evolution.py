@@ -4,6 +4,7 @@ resumes every study."""
 
 import dataclasses
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -15,10 +16,12 @@ import pytest
 from optuna.trial import TrialState
 
 from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.convergence import Convergence
 from ermrl.evolution.evolve import Member, evolve, evolve_together
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_sampler, open_study
 from ermrl.evolution.record import encode_study_record
+from ermrl.evolution.workers import WorkerConfig
 from ermrl.training import TrainConfig
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -43,7 +46,7 @@ def _trials(study: optuna.Study) -> list[tuple]:
 
 @pytest.mark.parametrize("env_id, timesteps, backend", [
     ("CartPoleNoVel-v1", 2048, "auto"),
-    ("Ant-v5", 4096, "mujoco"),  # two updates: an agent's update and its orthogonal init do not see the others
+    ("Swimmer-v5", 4096, "mujoco"),  # two updates: an agent's update and its orthogonal init do not see the others
 ])
 def test_studies_trained_as_one_population_get_the_trials_they_get_alone(env_id, timesteps, backend, tmp_path):
     configs = _configs(env_id, timesteps, backend)
@@ -58,6 +61,15 @@ def test_studies_trained_as_one_population_get_the_trials_they_get_alone(env_id,
         assert _trials(study) == expected
     assert [len(t) for t in alone] == [6, 6] and all(t[1] == TrialState.COMPLETE for t in alone[0] + alone[1])
     assert {t[4] for t in alone[0]} == {0, 1, 2}  # the random startup and two CMA-ES generations
+
+
+def test_studies_evolved_together_log_their_spread_under_their_names(tmp_path):
+    """Each study's worker logs its own lines (`--until-converged`'s spread per generation), led by its name."""
+    configs = [dataclasses.replace(c, trials=8) for c in _configs("CartPoleNoVel-v1", 2048)]
+    lines = []
+    evolve_together([Member(_open(tmp_path, f"s{k}", c), c, WorkerConfig(until_converged=Convergence()))
+                     for k, c in enumerate(configs)], log=lines.append)
+    assert [line.split(":")[0] for line in lines if re.match(r"s\d: generation 2: widest spread", line)] == ["s0", "s1"]
 
 
 def test_studies_of_other_shapes_are_refused(tmp_path):

@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ermrl.cli import options
 from ermrl.errors import ConfigError
+
+
+if TYPE_CHECKING:
+    from ermrl.experiments.registry import Scale
 
 
 def add_parser(sub, formatter) -> None:
@@ -77,8 +82,6 @@ def _study_label(spec) -> str:
 
 
 def _run(args) -> int:
-    import dataclasses
-
     import optuna
 
     from ermrl import envs, storage
@@ -129,23 +132,8 @@ def _run(args) -> int:
     print(f"experiment {experiment.name} at {scale.name} scale: {_count(len(plans), 'study', 'studies')} in {folder} "
           f"(storage {shown_url(url)})")
     if not args.no_estimate:
-        finished = sum(len(p.tests) - len(left.get(p.study, p.tests)) for p in plans)
-        seconds = runner.estimate_seconds(plans, done, left, args.baseline_store, budget.agents_per_run, unselected,
-                                           table)
-        print(f"estimated time: {seconds / 60:.0f} min (rough: nominal throughput, "
-              f"{_count(sum(done.values()), 'trial')} and {_count(finished, 'test phase')} already done)"
-              + (" if every study runs to its trial limit" if scale.until_converged else ""))
-        if scale.until_converged:
-            typical = [dataclasses.replace(p, config=dataclasses.replace(
-                p.config, trials=min(p.config.trials, registry.CONVERGED_TRIALS))) for p in plans]
-            seconds = runner.estimate_seconds(typical, done, left, args.baseline_store, budget.agents_per_run,
-                                               unselected, table)
-            print(f"  about {seconds / 60:.0f} min if each study converges after about {registry.CONVERGED_TRIALS} "
-                  "trials, as the paper's 900-trial CartPoleNoVel study did")
-            if any(p.spec.reservoirs > 1 for p in plans):
-                print("  (a study of 2 or more reservoirs searches 6 or more parameters and may not converge before "
-                      "its trial limit: the 2-reservoir HalfCheetah-v5 study, its fitness nearly flat across the "
-                      "Φ it samples, is projected to reach it unconverged; `ermrl convergence` projects a running study)")
+        lines, seconds = estimate_lines(plans, scale, done, left, unselected, args.baseline_store, budget, table)
+        print("\n".join(lines))
         if seconds >= 60 and (note := busy_note()):
             print(note)
 
@@ -157,3 +145,29 @@ def _run(args) -> int:
         close()
     print(f"report: {report.resolve()}")
     return 0
+
+
+def estimate_lines(plans: list, scale: Scale, done: dict[str, int], left: dict[str, list],
+                   unselected: set[str], baseline_store, budget, table) -> tuple[list[str], float]:
+    """The time estimate printed before an experiment runs, and its seconds (the likelier ones, at a scale that
+    stops at convergence): ``done`` and ``left`` are each study's completed trials and remaining test phases."""
+    import dataclasses
+
+    from ermrl.experiments import registry, runner
+
+    finished = sum(len(p.tests) - len(left.get(p.study, p.tests)) for p in plans)
+    seconds = runner.estimate_seconds(plans, done, left, baseline_store, budget.agents_per_run, unselected, table)
+    lines = [f"estimated time: {seconds / 60:.0f} min (rough: nominal throughput, "
+             f"{_count(sum(done.values()), 'trial')} and {_count(finished, 'test phase')} already done)"
+             + (" if every study runs to its trial limit" if scale.until_converged else "")]
+    if scale.until_converged:
+        typical = [dataclasses.replace(p, config=dataclasses.replace(
+            p.config, trials=min(p.config.trials, registry.CONVERGED_TRIALS))) for p in plans]
+        seconds = runner.estimate_seconds(typical, done, left, baseline_store, budget.agents_per_run, unselected,
+                                          table)
+        lines.append(f"  about {seconds / 60:.0f} min if each study converges after about "
+                     f"{registry.CONVERGED_TRIALS} trials, as the paper's 900-trial CartPoleNoVel study did")
+        if any(p.spec.reservoirs > 1 for p in plans):
+            lines.append("  (a study of 2 or more reservoirs searches 6 or more parameters and may not converge "
+                         "before its trial limit; `ermrl convergence` projects a running study)")
+    return lines, seconds

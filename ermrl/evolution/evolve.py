@@ -174,14 +174,16 @@ def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None =
     study claims its next batch (a generation, for a lone worker), the claims of all studies train as ONE
     population per env, and each study is told its own trials. An agent trains the same inside any population
     (:mod:`ermrl.training.programs`), so each study's trials are those it gets evolved alone. Progress is
-    reported for the first study of a round."""
+    reported for the first study of a round; ``log`` receives each worker's events (as :func:`evolve`), each line
+    led by its study's name when several evolve together."""
     if len({shape(m.config) for m in members}) > 1:
         raise ValueError("studies trained together must share their training config and envs")
     trainers = trainers or make_trainers(members[0].config)
     log = log or (lambda line: None)
     failed_in_a_row = [0] * len(members)
     with contextlib.ExitStack() as stack:
-        workers = [stack.enter_context(Worker(m.study, m.config, m.worker, log)) for m in members]
+        named = (lambda m: lambda line: log(f"{m.study.study_name}: {line}")) if len(members) > 1 else lambda m: log
+        workers = [stack.enter_context(Worker(m.study, m.config, m.worker, named(m))) for m in members]
         active = list(range(len(members)))
         while True:
             claims = []

@@ -297,7 +297,8 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
             bar = progress(f"evolve {'+'.join(q.spec.name for q in group)}") if progress else None
             evolve_together([Member(prepare(q)[1], prepare(q)[0], WorkerConfig(until_converged=q.until_converged))
                              for q in group], make_trainers(config),
-                            (lambda g: bar(g.train) if g.train else None) if bar else None)
+                            (lambda g: bar(g.train) if g.train else None) if bar else None,
+                            lambda line: log(f"    {line}"))
         stopped = convergence.recorded(study, p.until_converged) if p.until_converged else None
         if stopped:
             log(f"    converged at generation {stopped['generation']} ({stopped['trials']} trials)")
