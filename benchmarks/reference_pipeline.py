@@ -131,6 +131,22 @@ def train_one(env_name: str, seed: int, timesteps: int, phi: tuple[float, float,
     return wall, float(sum(returns[-10:]) / max(len(returns[-10:]), 1)), len(returns)
 
 
+def add_phi_options(p: argparse.ArgumentParser, defaults: tuple[float, float] | None) -> None:
+    """--sr, --leak-rate (dest ``lr``) and --iss; sr and leak rate required where ``defaults`` is None."""
+    sr, leak = defaults or (None, None)
+    shown = " (default: %(default)s)"
+    p.add_argument("--sr", type=float, default=sr, required=sr is None, help="spectral radius" + shown * bool(defaults))
+    p.add_argument("--leak-rate", dest="lr", type=float, default=leak, required=leak is None,
+                   help="leak rate" + shown * bool(defaults))
+    p.add_argument("--iss", type=float, default=1.0, help="input scaling" + shown)
+
+
+def check_phi(p: argparse.ArgumentParser, a: argparse.Namespace) -> None:
+    """Exits through ``p.error`` where Φ is out of its range."""
+    if not (a.sr > 0 and 0 < a.lr <= 1 and a.iss > 0):
+        p.error(f"Φ out of range: sr {a.sr} and iss {a.iss} must be > 0, lr {a.lr} in (0, 1]")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--env", choices=ENVS, default="CartPoleNoVel-v1", help="environment (default: %(default)s)")
@@ -138,9 +154,7 @@ def main(argv=None) -> int:
     p.add_argument("--timesteps", type=int, default=20000, help="model.learn() budget per agent (default: %(default)s)")
     p.add_argument("--procs", type=int, default=2, help="max worker processes at a time (default: %(default)s)")
     p.add_argument("--first-seed", type=int, default=0, help="seed of the first agent (default: %(default)s)")
-    p.add_argument("--sr", type=float, default=0.95, help="spectral radius (default: %(default)s)")
-    p.add_argument("--leak-rate", dest="lr", type=float, default=0.5, help="leak rate (default: %(default)s)")
-    p.add_argument("--iss", type=float, default=1.0, help="input scaling (default: %(default)s)")
+    add_phi_options(p, defaults=(0.95, 0.5))
     p.add_argument("--bias", choices=("none", "bernoulli"), default="none",
                    help="the reservoir's bias: none (ReservoirPy 0.4) or bernoulli (0.3, the paper's, and ermrl's "
                         "default) (default: %(default)s)")
@@ -151,8 +165,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.agents < 1 or a.timesteps < 1 or a.procs < 1:
         p.error("--agents, --timesteps and --procs must be >= 1")
-    if not (a.sr > 0 and 0 < a.lr <= 1 and a.iss > 0):
-        p.error(f"Φ out of range: sr {a.sr} and iss {a.iss} must be > 0, lr {a.lr} in (0, 1]")
+    check_phi(p, a)
     check_deps()
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[var] = "1"  # inherited by the spawned workers before numpy/torch load

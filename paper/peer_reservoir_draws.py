@@ -28,13 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from reference_pipeline import add_phi_options, check_phi  # noqa: E402  (the reference pipeline's own Φ options)
+
 
 def reservoirpy_unit_weights(env_id: str, seed: int, sr: float, lr: float, iss: float, bias: str):
     """ReservoirPy's reservoir for ``seed`` as the reference pipeline builds it, as ermrl unit weights (K = 1):
     W (1, N, N) / sr, Win (1, N, D) / iss, bias (1, N); float32."""
     from ermrl.reservoir import ReservoirWeights
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # reference_pipeline.py
     from reference_pipeline import make_env
 
     env = make_env(env_id, seed, sr, lr, iss, bias=bias)
@@ -69,9 +71,7 @@ def main(argv=None) -> int:
     p.add_argument("--agents", type=int, default=10, help="seeds FIRST..FIRST+A-1 (default: %(default)s)")
     p.add_argument("--first-seed", type=int, default=0, help="first seed (default: %(default)s)")
     p.add_argument("--timesteps", type=int, default=300000, help="env steps per agent (default: %(default)s)")
-    p.add_argument("--sr", type=float, required=True, help="spectral radius")
-    p.add_argument("--leak-rate", dest="lr", type=float, required=True, help="leak rate")
-    p.add_argument("--iss", type=float, default=1.0, help="input scaling (default: %(default)s)")
+    add_phi_options(p, defaults=None)
     p.add_argument("--bias", choices=("none", "bernoulli"), default="bernoulli",
                    help="the reservoir's bias (default: %(default)s)")
     p.add_argument("--draws", nargs="+", choices=("reservoirpy", "ermrl"), default=["reservoirpy", "ermrl"],
@@ -80,8 +80,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.agents < 1 or a.timesteps < 1 or a.first_seed < 0:
         p.error("--agents and --timesteps must be >= 1, --first-seed >= 0")
-    if not (a.sr > 0 and 0 < a.lr <= 1 and a.iss > 0):
-        p.error(f"Φ out of range: sr {a.sr} and iss {a.iss} must be > 0, lr {a.lr} in (0, 1]")
+    check_phi(p, a)
     seeds = list(range(a.first_seed, a.first_seed + a.agents))
     phi = (a.sr, a.lr, a.iss)
     out = {"env": a.env, "timesteps": a.timesteps, "phi": dict(zip(("sr", "lr", "iss"), phi)), "bias": a.bias,
