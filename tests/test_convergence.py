@@ -107,6 +107,26 @@ def test_the_spread_read_back_from_the_paper_study_matches_the_sampled_phi():
         assert all(abs(t.params[name] / last[name][0] - 1) < 0.01 for t in tail)
 
 
+def test_a_trial_killed_while_optuna_wrote_its_optimizer_is_passed_over():
+    """A process killed between two of the chunks in which Optuna stores the CMA-ES optimizer leaves a trial with
+    some of them (a hex string cut mid-byte, a pickle without its end, or a gap); the spread is read from the
+    generation's other trials."""
+    study = load_study(f"journal:{PAPER}", PAPER_STUDY)
+    trials = study.get_trials(deepcopy=True)
+    space = SearchSpace(fixed_iss=1.0)
+    expected = convergence.centers_and_spreads(trials, space)
+    first, second = f"{convergence.OPTIMIZER_KEY}0", f"{convergence.OPTIMIZER_KEY}1"
+    damaged = [t for t in trials[:90] if second in t.system_attrs][::2]  # every other trial of generations 0–14
+    for k, t in enumerate(damaged):
+        if k % 3 == 2:
+            del t.system_attrs[first]  # a gap: the second chunk alone
+        else:
+            del t.system_attrs[second]
+            t.system_attrs[first] = t.system_attrs[first][:2045 - k % 3]  # odd: not hex; even: a cut pickle
+    assert len(damaged) == 39 and {len(t.system_attrs[first]) for t in damaged if first in t.system_attrs} == {2044, 2045}
+    assert convergence.centers_and_spreads(trials, space) == expected
+
+
 def test_the_replay_on_the_paper_study_stops_at_generation_32_and_copies_the_study_as_the_rule_left_it(tmp_path):
     out, copy = tmp_path / "replay", f"journal:{tmp_path / 'replay.log'}"
     run = cli("convergence", "--study", PAPER_STUDY, "--storage", f"journal:{PAPER}", "--out", out,

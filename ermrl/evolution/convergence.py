@@ -66,10 +66,17 @@ class Convergence:
 
 
 def _optimizer(trial: FrozenTrial):
+    """The CMA-ES optimizer Optuna stored on ``trial`` (in chunks), or None where it stored none or a process
+    killed while it wrote them left only some (the trial then failed; its generation's other trials hold the same
+    optimizer). Optuna's own sampler reads only completed trials' copies."""
     parts = {k: v for k, v in trial.system_attrs.items() if k.startswith(OPTIMIZER_KEY)}
-    if not parts:
+    chunks = [parts.get(f"{OPTIMIZER_KEY}{i}") for i in range(len(parts))]
+    if not parts or None in chunks:
         return None
-    return pickle.loads(bytes.fromhex("".join(parts[f"{OPTIMIZER_KEY}{i}"] for i in range(len(parts)))))
+    try:
+        return pickle.loads(bytes.fromhex("".join(chunks)))
+    except (ValueError, EOFError, pickle.UnpicklingError):
+        return None  # its last chunks were never written
 
 
 def centers_and_spreads(trials: list[FrozenTrial], space: SearchSpace) -> dict[int, dict[str, tuple[float, float]]]:
