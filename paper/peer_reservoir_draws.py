@@ -28,8 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from reference_pipeline import add_phi_options, check_phi  # noqa: E402  (the reference pipeline's own Φ options)
+
+def _reference_pipeline():
+    """benchmarks/reference_pipeline.py, imported from beside this script."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import reference_pipeline
+
+    return reference_pipeline
 
 
 def reservoirpy_unit_weights(env_id: str, seed: int, sr: float, lr: float, iss: float, bias: str):
@@ -37,9 +42,7 @@ def reservoirpy_unit_weights(env_id: str, seed: int, sr: float, lr: float, iss: 
     W (1, N, N) / sr, Win (1, N, D) / iss, bias (1, N); float32."""
     from ermrl.reservoir import ReservoirWeights
 
-    from reference_pipeline import make_env
-
-    env = make_env(env_id, seed, sr, lr, iss, bias=bias)
+    env = _reference_pipeline().make_env(env_id, seed, sr, lr, iss, bias=bias)
     env.reset(seed=seed)  # initializes the reservoir (its weights are drawn at its first call)
     dense = lambda m: m.toarray() if hasattr(m, "toarray") else np.asarray(m)
     W, Win = dense(env.res.W) / sr, dense(env.res.Win) / iss
@@ -71,7 +74,8 @@ def main(argv=None) -> int:
     p.add_argument("--agents", type=int, default=10, help="seeds FIRST..FIRST+A-1 (default: %(default)s)")
     p.add_argument("--first-seed", type=int, default=0, help="first seed (default: %(default)s)")
     p.add_argument("--timesteps", type=int, default=300000, help="env steps per agent (default: %(default)s)")
-    add_phi_options(p, defaults=None)
+    reference = _reference_pipeline()
+    reference.add_phi_options(p, defaults=None)
     p.add_argument("--bias", choices=("none", "bernoulli"), default="bernoulli",
                    help="the reservoir's bias (default: %(default)s)")
     p.add_argument("--draws", nargs="+", choices=("reservoirpy", "ermrl"), default=["reservoirpy", "ermrl"],
@@ -80,7 +84,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.agents < 1 or a.timesteps < 1 or a.first_seed < 0:
         p.error("--agents and --timesteps must be >= 1, --first-seed >= 0")
-    check_phi(p, a)
+    reference.check_phi(p, a)
     seeds = list(range(a.first_seed, a.first_seed + a.agents))
     phi = (a.sr, a.lr, a.iss)
     out = {"env": a.env, "timesteps": a.timesteps, "phi": dict(zip(("sr", "lr", "iss"), phi)), "bias": a.bias,

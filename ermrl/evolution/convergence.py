@@ -70,13 +70,12 @@ def _optimizer(trial: FrozenTrial):
     killed while it wrote them left only some (the trial then failed; its generation's other trials hold the same
     optimizer). Optuna's own sampler reads only completed trials' copies."""
     parts = {k: v for k, v in trial.system_attrs.items() if k.startswith(OPTIMIZER_KEY)}
-    chunks = [parts.get(f"{OPTIMIZER_KEY}{i}") for i in range(len(parts))]
-    if not parts or None in chunks:
+    if not parts:
         return None
     try:
-        return pickle.loads(bytes.fromhex("".join(chunks)))
-    except (ValueError, EOFError, pickle.UnpicklingError):
-        return None  # its last chunks were never written
+        return pickle.loads(bytes.fromhex("".join(parts[f"{OPTIMIZER_KEY}{i}"] for i in range(len(parts)))))
+    except (KeyError, ValueError, EOFError, pickle.UnpicklingError):
+        return None  # a chunk missing, or the last ones never written
 
 
 def centers_and_spreads(trials: list[FrozenTrial], space: SearchSpace) -> dict[int, dict[str, tuple[float, float]]]:

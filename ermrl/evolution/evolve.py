@@ -182,8 +182,9 @@ def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None =
     log = log or (lambda line: None)
     failed_in_a_row = [0] * len(members)
     with contextlib.ExitStack() as stack:
-        named = (lambda m: lambda line: log(f"{m.study.study_name}: {line}")) if len(members) > 1 else lambda m: log
-        workers = [stack.enter_context(Worker(m.study, m.config, m.worker, named(m))) for m in members]
+        workers = [stack.enter_context(Worker(m.study, m.config, m.worker, log if len(members) == 1 else
+                                              lambda line, name=m.study.study_name: log(f"{name}: {line}")))
+                   for m in members]
         active = list(range(len(members)))
         while True:
             claims = []
