@@ -50,10 +50,11 @@ def h2_converged_interim() -> Step:
                     "--compare", label, "PPO (same observation)", "--compare", label, "small study",
                     "--title", f"Φ* after {generation + 1} CMA-ES generations",
                     "--figure", f"{d}/comparison.png", tee=f"{d}/comparison.md")]
-    return step("h2_converged_interim", "C7", "h2_converged's studies ahead of their end (HalfCheetah after "
-                "generation 19): each study's trials up to a generation copied aside (paper/study_so_far.py), the "
-                "top 5 re-evaluated on 5 seeds, Φ* tested 10 × 1M against PPO (from the store), and compared with "
-                "the small study's Φ*", actions)
+    so_far = ", ".join(f"{task} after generation {generation}" for task, generation in SO_FAR.items())
+    return step("h2_converged_interim", "C7", f"h2_converged's studies ahead of their end ({so_far}): each "
+                "study's trials up to a generation copied aside (paper/study_so_far.py), the top 5 re-evaluated "
+                "on 5 seeds, Φ* tested 10 × 1M against PPO (from the store), and compared with the small study's "
+                "Φ*", actions)
 
 
 def h3_converged() -> Step:
