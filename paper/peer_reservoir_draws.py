@@ -31,7 +31,9 @@ import numpy as np
 
 def _reference_pipeline():
     """benchmarks/reference_pipeline.py, imported from beside this script."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    if benchmarks not in sys.path:
+        sys.path.insert(0, benchmarks)
     import reference_pipeline
 
     return reference_pipeline
