@@ -175,6 +175,21 @@ def _leave(code: int, why: str) -> NoReturn:
     os._exit(code)
 
 
+def _stopped_by(e: BaseException) -> tuple[int, str] | None:
+    """The exit status and line of the stop that ``e`` replaced, if it was raised while Ctrl-C or SIGTERM unwound
+    the command (e.g. ``ZipFile.close`` refusing to close over a write handle that SIGTERM left open), else None."""
+    seen: set[int] = set()
+    cause: BaseException | None = e
+    while cause is not None and id(cause) not in seen:
+        seen.add(id(cause))
+        if isinstance(cause, KeyboardInterrupt):
+            return 130, "interrupted"
+        if isinstance(cause, SystemExit) and cause.code == TERMINATED:
+            return TERMINATED, "terminated (SIGTERM)"
+        cause = cause.__cause__ or cause.__context__
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Runs the command ``argv`` (default: the process's arguments) and returns its exit status. While it runs,
     SIGTERM (where nothing else handles it) stops it as Ctrl-C does: what it had half-written is removed, and it
@@ -225,6 +240,8 @@ def _run(argv: list[str] | None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1
     except Exception as e:  # a bug, or the system failing (disk full, ...): one line unless --debug
+        if (stop := _stopped_by(e)) is not None:  # a library's clean-up replaced Ctrl-C or SIGTERM with its error
+            _leave(*stop)
         if debug:
             traceback.print_exc()
         if (message := _damaged_storage(e, locals().get("args"))) is not None:  # bad input: a damaged study.db
