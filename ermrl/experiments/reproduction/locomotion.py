@@ -30,7 +30,7 @@ def h2_converged() -> Step:
 
 
 CONVERGED = "docs/data/locomotion-converged"
-SO_FAR = {"halfcheetah": 19, "ant": 19}
+SO_FAR = {"halfcheetah": 19, "ant": 19, "swimmer": 19}
 """{task: the last generation of its converged-scale C7 study that ``h2_converged_interim`` selects and tests
 from}: a study ahead of its end, while it runs on (add a task once its study has about 20 generations)."""
 
