@@ -17,6 +17,7 @@ import optuna
 import pytest
 from optuna.trial import TrialState
 
+from ermrl import provenance
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.evolve import evolve, make_trainers
 from ermrl.evolution.generations import FULL
@@ -103,6 +104,8 @@ def test_three_workers_share_one_study(postgres_url, tmp_path, compiled_once):
     assert per_generation == {g: POPSIZE for g in range(TRIALS // POPSIZE)}
     workers = {t.user_attrs[WORKER_ATTR]["index"] for t in trials if t.state == TrialState.COMPLETE}
     assert len(workers) >= 2, "the study was not shared"
+    cpus = {t.user_attrs[WORKER_ATTR]["cpu"] for t in trials if t.state == TrialState.COMPLETE}
+    assert cpus == {provenance.cpu()}  # each trial names the instruction set its numbers were computed with
     assert all(t.user_attrs.get("failure") == FULL for t in trials if t.state == TrialState.FAIL)
 
 

@@ -32,6 +32,8 @@ from optuna.exceptions import UpdateFinishedTrialError
 from optuna.storages._heartbeat import is_heartbeat_enabled
 from optuna.trial import FrozenTrial, TrialState
 
+from ermrl import provenance
+
 HEARTBEAT_ATTR = "ermrl:heartbeat"
 """The trial system attribute holding the last heartbeat (Unix time) where Optuna has no heartbeats."""
 WORKER_ATTR = "worker"
@@ -87,7 +89,9 @@ def process_gone(pid: int, started: int | None) -> bool:
 @dataclasses.dataclass(frozen=True)
 class WorkerId:
     """Who trains a trial: the host name, the machine (boot and pid namespace), the process (id and start) and
-    the worker index; ``token`` is unique to this process, even where process ids repeat (containers)."""
+    the worker index; ``token`` is unique to this process, even where process ids repeat (containers). ``cpu``
+    (:func:`ermrl.provenance.cpu`, "x86_64 AVX2") tells which instruction set the trial's numbers were computed
+    with, where the study's ``software`` record names only the first run's."""
 
     host: str
     machine: str
@@ -95,10 +99,12 @@ class WorkerId:
     started: int | None
     index: int
     token: str
+    cpu: str
 
     @classmethod
     def here(cls, index: int) -> "WorkerId":
-        return cls(socket.gethostname(), _machine(), os.getpid(), _started(os.getpid()), index, uuid.uuid4().hex)
+        return cls(socket.gethostname(), _machine(), os.getpid(), _started(os.getpid()), index, uuid.uuid4().hex,
+                   provenance.cpu())
 
     def record(self) -> dict:
         return dataclasses.asdict(self)
