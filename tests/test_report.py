@@ -82,8 +82,20 @@ def test_report_contents(tmp_path, k):
     assert "Software" not in doc  # a study from before the versions were recorded
     study.set_user_attr("software", {"python": "3.11.7", "cpu": "x86_64 AVX2", "jax": "0.10.2"})
     doc = write_report(study, tmp_path).read_text()
-    software = doc[doc.index("<summary>Software (the study's first run)</summary>"):]
+    software = doc[doc.index("<summary>Software (the study's first run) and the CPUs its trials ran on</summary>"):]
     assert "<td>cpu</td><td>x86_64 AVX2</td>" in software and "<td>jax</td><td>0.10.2</td>" in software
+    assert "completed trials" not in software  # no trial records its CPU: no table of "not recorded" alone
+
+
+def test_report_counts_the_cpus_the_trials_ran_on(tmp_path):
+    study = make_study(1, n_complete=2, n_failed=0)
+    first = study.trials[0]
+    for cpu in ("x86_64 AVX2", "x86_64 AVX-512", "x86_64 AVX2", "x86_64 AVX2"):
+        study.add_trial(create_trial(params=first.params, distributions=first.distributions, value=1.0,
+                                     user_attrs={"generation": 1, "worker": {"host": "vm", "cpu": cpu}}))
+    cpus = write_report(study, tmp_path).read_text().split("<th>completed trials</th>")[1].split("</table>")[0]
+    assert re.findall(r"<td>([^<]+)</td><td class=\"n\">(\d+)</td>", cpus) == [
+        ("x86_64 AVX2", "3"), ("not recorded", "2"), ("x86_64 AVX-512", "1")]
 
 
 def test_report_test_phase(tmp_path):

@@ -7,6 +7,7 @@ The study keeps its configuration in ``study.user_attrs["ermrl"]``; each complet
 
 from __future__ import annotations
 
+import collections
 import html
 import math
 import os
@@ -29,6 +30,7 @@ from ermrl.analysis.html import table as _table
 from ermrl.analysis.plots import learning_curves
 from ermrl.analysis.statistics import format_ci
 from ermrl.errors import ConfigError
+from ermrl.evolution.heartbeat import WORKER_ATTR
 from ermrl.model_labels import param_name
 
 MARKERS = ("o", "^", "s", "D", "v", "P", "*", "X")
@@ -336,10 +338,19 @@ def spread_section(study: optuna.Study, record: dict, run_dir: Path) -> list[str
             f"{html.escape(where)}</p>", _img(fig, "Φ spread per generation")]
 
 
+def ran_on(trials: list[FrozenTrial]) -> list[list]:
+    """[[cpu, number of trials], ...] from each trial's worker record ("x86_64 AVX2"; "not recorded" for trials
+    of ermrl versions before it), most trials first; [] when no trial records its CPU."""
+    cpus = collections.Counter(w.get("cpu", "not recorded") if isinstance(w := t.user_attrs.get(WORKER_ATTR), dict)
+                               else "not recorded" for t in trials)
+    return [[cpu, n] for cpu, n in cpus.most_common()] if set(cpus) - {"not recorded"} else []
+
+
 def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | None = None) -> Path:
     """Writes ``<run_dir>/report.html`` (or ``out``), with fitness_over_trials.png and hp_map.png beside it in
     run_dir. Results come first (best and selected Φ, test phases with their statistics, the analyses found in
-    run_dir), then the evolution's figures, failed trials, the configuration and the software versions (collapsed)."""
+    run_dir), then the evolution's figures, failed trials, the configuration, and the software versions with the
+    CPUs the trials ran on (collapsed)."""
     run_dir = Path(run_dir)
     out = Path(out) if out is not None else run_dir / "report.html"
     cfg = study.user_attrs.get("ermrl", {})
@@ -395,9 +406,10 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
             [t.number, t.user_attrs.get("generation", ""), str(t.user_attrs.get("failure", ""))] for t in bad])]
     parts += ["<details><summary>Configuration</summary>",
               _table(["key", "value"], [[key, v] for key, v in _flatten(cfg)]), "</details>"]
-    software = study.user_attrs.get("software")
-    if software:  # ermrl.provenance: what a seed-for-seed rerun needs
-        parts += ["<details><summary>Software (the study's first run)</summary>",
-                  _table(["package", "version"], [[key, v] for key, v in software.items()]), "</details>"]
+    software = study.user_attrs.get("software") or {}
+    if software or ran_on(done):  # ermrl.provenance: what a seed-for-seed rerun needs
+        parts += ["<details><summary>Software (the study's first run) and the CPUs its trials ran on</summary>",
+                  *([_table(["package", "version"], [[key, v] for key, v in software.items()])] if software else []),
+                  *([_table(["CPU", "completed trials"], ran_on(done))] if ran_on(done) else []), "</details>"]
     storage.write_text(out, page(title, parts))
     return out
