@@ -341,8 +341,8 @@ def spread_section(study: optuna.Study, record: dict, run_dir: Path) -> list[str
 def ran_on(trials: list[FrozenTrial]) -> list[list]:
     """[[cpu, number of trials], ...] from each trial's worker record ("x86_64 AVX2"; "not recorded" for trials
     of ermrl versions before it), most trials first; [] when no trial records its CPU."""
-    cpus = collections.Counter(w.get("cpu", "not recorded") if isinstance(w := t.user_attrs.get(WORKER_ATTR), dict)
-                               else "not recorded" for t in trials)
+    workers = (t.user_attrs.get(WORKER_ATTR) for t in trials)
+    cpus = collections.Counter(w.get("cpu", "not recorded") if isinstance(w, dict) else "not recorded" for w in workers)
     return [[cpu, n] for cpu, n in cpus.most_common()] if set(cpus) - {"not recorded"} else []
 
 
@@ -406,10 +406,10 @@ def write_report(study: optuna.Study, run_dir: Path | str, out: Path | str | Non
             [t.number, t.user_attrs.get("generation", ""), str(t.user_attrs.get("failure", ""))] for t in bad])]
     parts += ["<details><summary>Configuration</summary>",
               _table(["key", "value"], [[key, v] for key, v in _flatten(cfg)]), "</details>"]
-    software = study.user_attrs.get("software") or {}
-    if software or ran_on(done):  # ermrl.provenance: what a seed-for-seed rerun needs
+    software, cpus = study.user_attrs.get("software") or {}, ran_on(done)
+    if software or cpus:  # ermrl.provenance: what a seed-for-seed rerun needs
         parts += ["<details><summary>Software (the study's first run) and the CPUs its trials ran on</summary>",
                   *([_table(["package", "version"], [[key, v] for key, v in software.items()])] if software else []),
-                  *([_table(["CPU", "completed trials"], ran_on(done))] if ran_on(done) else []), "</details>"]
+                  *([_table(["CPU", "completed trials"], cpus)] if cpus else []), "</details>"]
     storage.write_text(out, page(title, parts))
     return out
