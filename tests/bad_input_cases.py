@@ -11,7 +11,8 @@ STEPS = ("cartpole pendulum pendulum_medium pendulum_paper pendulum_lr1e4 lunarl
          "pendulum_500u_near_default pendulum_500u_near_default_wide pendulum_500u_near_default_wide_50 "
          "pendulum_500u_more_seeds pendulum_100u_near_default_wide deterministic_eval pendulum_rlzoo_ppo "
          "pendulum_normalize pendulum_rlzoo_sde pendulum_rlzoo_policy pendulum_rlzoo_evolve pendulum_rlzoo_lstm "
-         "recurrent_vs_ermrl other_hps h2_converged h2_converged_interim h3_converged c8_converged c3_converged").split()
+         "recurrent_vs_ermrl other_hps h2_converged h2_converged_interim h3_converged h3_converged_interim c8_converged "
+         "c3_converged").split()
 """`ermrl reproduce`'s steps, in order."""
 
 CASES = [

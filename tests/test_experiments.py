@@ -12,6 +12,7 @@ from optuna.trial import TrialState
 
 from ermrl.evolution.record import decode_study_record, encode_study_record
 from ermrl.agent import AgentConfig, Phi
+from ermrl.evolution.evolve import shared_envs
 from ermrl.evolution.study import load_study
 from ermrl.experiments import registry, runner
 from ermrl.experiments.baselines import load_table, nscore, resolve
@@ -189,6 +190,24 @@ def test_studies_that_evolve_on_ant_get_trials_long_enough_for_ppo_to_beat_rando
     assert steps == {"smoke": {"to-ant": 2048, "to-halfcheetah": 2048, "to-swimmer": 2048},
                      "small": {"to-ant": 50_000, "to-halfcheetah": 200_000, "to-swimmer": 200_000},
                      "medium": {"to-ant": 300_000, "to-halfcheetah": 300_000, "to-swimmer": 300_000}}
+
+
+def test_generalization_groups_evolve_together_and_other_agent_shapes_apart(tmp_path):
+    """At `converged` every generalization group shares one env, trained alike, with each other group, so
+    `experiment run` trains them together (one population per env); groups of another reservoir count (C16) or
+    another budget (`small`'s 50k-step to-ant) share none."""
+    def shared(experiment, scale):
+        plans = runner.plan(registry.get(experiment), registry.get_scale(scale), tmp_path)
+        return {(p.spec.name, q.spec.name): shared_envs(p.config, q.config)
+                for p in plans for q in plans if p.spec.name < q.spec.name}
+
+    assert shared("generalization-morphology", "converged") == {
+        ("to-ant", "to-halfcheetah"): ("Swimmer-v5",), ("to-ant", "to-swimmer"): ("HalfCheetah-v5",),
+        ("to-halfcheetah", "to-swimmer"): ("Ant-v5",)}
+    assert shared("generalization-morphology", "small")[("to-ant", "to-swimmer")] == ()
+    count = shared("reservoir-count", "small")
+    assert count[("to-ant-1res", "to-ant-2res")] == () and count[("to-halfcheetah-2res", "to-swimmer-2res")] == \
+        ("Ant-v5",)
 
 
 def run_smoke(name, tmp_path, only=()):

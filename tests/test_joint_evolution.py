@@ -1,6 +1,6 @@
-"""Several studies of one training shape evolved as one population (``evolve_together``): each study's trials are
-those it gets alone, trial by trial, on the JAX and the MuJoCo backends, and a kill during a joint generation
-resumes every study."""
+"""Several studies evolved together (``evolve_together``), one population per env: studies of one training shape,
+and studies that share one env (generalization groups). Each study's trials are those it gets alone, trial by
+trial, on the JAX and the MuJoCo backends, and a kill during a joint generation resumes every study."""
 
 import dataclasses
 import os
@@ -17,7 +17,8 @@ from optuna.trial import TrialState
 
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.convergence import Convergence
-from ermrl.evolution.evolve import Member, evolve, evolve_together
+from ermrl.evolution.evolve import Member, evolve, evolve_together, make_trainers, shared_envs
+from ermrl.evolution.scoring import Baseline
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_sampler, open_study
 from ermrl.evolution.record import encode_study_record
@@ -72,10 +73,48 @@ def test_studies_evolved_together_log_their_spread_under_their_names(tmp_path):
     assert [line.split(":")[0] for line in lines if re.match(r"s\d: generation 2: widest spread", line)] == ["s0", "s1"]
 
 
-def test_studies_of_other_shapes_are_refused(tmp_path):
+def _overlapping() -> list[EvolveConfig]:
+    """Two normalized (nScore) studies, as two generalization groups, that share one env (CartPole-v1) and each
+    evolve on one env of their own."""
+    base = EvolveConfig(train=TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048), space=SearchSpace(),
+                        trials=6, seeds=2, popsize=2, envs=("CartPoleNoVel-v1", "CartPole-v1"),
+                        baselines=(Baseline("CartPoleNoVel-v1", 20.0, 1.0, 40.0),
+                                   Baseline("CartPole-v1", 20.0, 1.0, 60.0)))
+    other = dataclasses.replace(base, train=dataclasses.replace(base.train, env_id="CartPole-v1"), sampler_seed=1,
+                                envs=("CartPole-v1", "PendulumNoVel-v1"),
+                                baselines=(base.baselines[1], Baseline("PendulumNoVel-v1", -1200.0, -6.0, -900.0)))
+    return [base, other]
+
+
+def test_studies_that_share_one_env_train_it_as_one_population_and_get_the_trials_they_get_alone(tmp_path):
+    configs = _overlapping()
+    assert [shared_envs(configs[0], c) for c in configs] == [("CartPoleNoVel-v1", "CartPole-v1"), ("CartPole-v1",)]
+    alone = []
+    for k, config in enumerate(configs):
+        study = _open(tmp_path, f"alone{k}", config)
+        evolve(study, config)
+        alone.append(_trials(study) + [t.user_attrs["env_nscores"] for t in study.trials])
+    trainers = make_trainers(*configs)
+    sizes = {e: [] for e in trainers}
+    for env_id, trainer in trainers.items():  # a spy on the real trainers: the population each round trains
+        real = trainer.run
+        trainer.run = lambda population, report, real=real, env_id=env_id: (
+            sizes[env_id].append(population.size) or real(population, report))
+    together = [_open(tmp_path, f"together{k}", config) for k, config in enumerate(configs)]
+    evolve_together([Member(study, config) for study, config in zip(together, configs)], trainers)
+    for study, expected in zip(together, alone):
+        assert _trials(study) + [t.user_attrs["env_nscores"] for t in study.trials] == expected
+    # 3 generations of 2 trials × 2 seeds each: the shared env trains both studies' 8 agents at once
+    assert sizes == {"CartPoleNoVel-v1": [4, 4, 4], "CartPole-v1": [8, 8, 8], "PendulumNoVel-v1": [4, 4, 4]}
+    assert all(t[1] == TrialState.COMPLETE for t in alone[0][:6] + alone[1][:6])
+
+
+def test_studies_that_train_a_shared_env_differently_are_refused(tmp_path):
     a, b = _configs("CartPoleNoVel-v1", 2048)
     b = dataclasses.replace(b, train=dataclasses.replace(b.train, total_timesteps=4096))
-    with pytest.raises(ValueError, match="must share their training config and envs"):
+    assert shared_envs(a, b) == ()
+    with pytest.raises(ValueError, match="^studies trained together must train each env they share alike; "
+                                         "CartPoleNoVel-v1 differs$"):
         evolve_together([Member(_open(tmp_path, "a", a), a), Member(_open(tmp_path, "b", b), b)])
 
 

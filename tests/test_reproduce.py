@@ -41,6 +41,7 @@ def test_a_claim_picks_its_steps_in_order_and_a_step_name_itself():
     assert names(["C3"]) == ["lunarlander", "lunarlander_1res", "c3_converged"]
     assert names(["c8"]) == ["c8"]  # a step's name, lower case; C8 is the claim
     assert names(["C8"]) == ["c8", "c8_converged"]
+    assert names(["C10"]) == ["h3", "h3_converged", "h3_converged_interim"]
     assert names(["pendulum", "h2", "pendulum"]) == ["pendulum", "h2"]  # the order given, each once
     assert names(["C9", "fft"]) == ["fft", "fft_early"]
     assert names([]) == list(catalog.ORDER)
@@ -61,6 +62,21 @@ def test_dry_run_prints_the_exact_commands():
                           "# stash runs/experiments/locomotion-converged -> docs/data/locomotion-converged (also when "
                           "the run stops)"]
     assert len(lines) == 13
+
+
+def test_an_interim_generalization_test_runs_on_the_held_out_env():
+    r = ermrl("reproduce", "--dry-run", "h3_converged_interim")
+    assert r.returncode == 0, r.stderr
+    d = "docs/data/generalization-morphology-converged/to-ant-gen21"
+    where = f"--study generalization-morphology-converged-to-ant --storage {d}/studies.log"
+    assert r.stdout.splitlines()[1:4] == [
+        f"[ -e {d}/studies.log ] || python paper/study_so_far.py --study generalization-morphology-converged-to-ant "
+        f"--storage journal:docs/data/generalization-morphology-converged/studies.log --generation 21 --to "
+        f"journal:{d}/studies.log",
+        f"ermrl select {where} --out runs/generalization-morphology-converged-to-ant-gen21 --top 5 --seeds 5 --quiet",
+        f"[ -e {d}/test-Ant-v5/summary.json ] || ermrl test {where} --out {d} --env Ant-v5 --seeds 10 --timesteps "
+        "1000000 --auc-steps 300000 --baseline-store docs/data/baseline-models --no-save-agents --quiet"]
+    assert "small study=docs/data/generalization-morphology-small/to-ant/test-Ant-v5/summary.json" in r.stdout
 
 
 def test_dry_run_shows_skip_conditions_values_known_later_and_output_files():

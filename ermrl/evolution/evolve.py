@@ -136,9 +136,12 @@ def estimate_seconds(trainers: dict[str, Trainer], config: EvolveConfig, remaini
     return -(-remaining // batch) * sum(generation_seconds(t, config, batch) for t in trainers.values())
 
 
-def make_trainers(config: EvolveConfig) -> dict[str, Trainer]:
-    """One trainer (one compile per population size) for each env of the evolution."""
-    return {e: Trainer(config.train_for(e)) for e in config.env_ids}
+def make_trainers(*configs: EvolveConfig) -> dict[str, Trainer]:
+    """One trainer (one compile per population size) for each env of the evolution, or of several evolutions
+    trained together (each env trained as the first of them that evolves on it: they must agree, see
+    :func:`evolve_together`)."""
+    env_ids = dict.fromkeys(e for c in configs for e in c.env_ids)
+    return {e: Trainer(next(c for c in configs if e in c.env_ids).train_for(e)) for e in env_ids}
 
 
 def evolve(study: optuna.Study, config: EvolveConfig, trainers: dict[str, Trainer] | None = None,
@@ -161,24 +164,30 @@ class Member:
     worker: WorkerConfig = WorkerConfig()
 
 
-def shape(config: EvolveConfig) -> tuple:
-    """What studies must share to train as one population: the training config (env, agent shape, PPO settings,
-    budget) and the envs of the fitness."""
-    return config.train, config.env_ids
+def shared_envs(a: EvolveConfig, b: EvolveConfig) -> tuple[str, ...]:
+    """The envs on which two studies' populations can train as one: those both evolve on, when each of them has
+    the same training (agent shape, PPO settings, budget) in both; none when the studies share no env or train
+    one of their shared envs differently."""
+    shared = tuple(e for e in a.env_ids if e in b.env_ids)
+    return shared if all(a.train_for(e) == b.train_for(e) for e in shared) else ()
 
 
 def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None = None,
                     progress_fn: Callable[[GenerationProgress], None] | None = None,
                     log: Callable[[str], None] | None = None) -> None:
-    """Works on several studies of one :func:`shape` at once until each is done: every round, each unfinished
-    study claims its next batch (a generation, for a lone worker), the claims of all studies train as ONE
-    population per env, and each study is told its own trials. An agent trains the same inside any population
-    (:mod:`ermrl.training.programs`), so each study's trials are those it gets evolved alone. Progress is
-    reported for the first study of a round; ``log`` receives each worker's events (as :func:`evolve`), each line
-    led by its study's name when several evolve together."""
-    if len({shape(m.config) for m in members}) > 1:
-        raise ValueError("studies trained together must share their training config and envs")
-    trainers = trainers or make_trainers(members[0].config)
+    """Works on several studies at once until each is done: every round, each unfinished study claims its next
+    batch (a generation, for a lone worker), the claims train as ONE population per env (every study that evolves
+    on that env adds its agents: studies of one shape share every env, a generalization group shares one env with
+    each other group), and each study is told its own trials. An agent trains the same inside any population
+    (:mod:`ermrl.training.programs`), so each study's trials are those it gets evolved alone. The studies must
+    train each env they share alike (:func:`shared_envs`). Progress is reported for the first study of a round;
+    ``log`` receives each worker's events (as :func:`evolve`), each line led by its study's name when several
+    evolve together."""
+    env_ids = tuple(dict.fromkeys(e for m in members for e in m.config.env_ids))
+    for e in env_ids:
+        if len({m.config.train_for(e) for m in members if e in m.config.env_ids}) > 1:
+            raise ValueError(f"studies trained together must train each env they share alike; {e} differs")
+    trainers = trainers or make_trainers(*(m.config for m in members))
     log = log or (lambda line: None)
     failed_in_a_row = [0] * len(members)
     with contextlib.ExitStack() as stack:
@@ -201,8 +210,12 @@ def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None =
                                 members[i].config.space.reservoirs) for phi, g in zip(claim.phis, claim.generations)])
                 for i, claim in claims]
             first, lead = members[claims[0][0]], claims[0][1]
-            results = {}
-            for env_id, trainer in trainers.items():
+            results: list[dict[str, Results]] = [{} for _ in claims]
+            for env_id in env_ids:
+                takers = [k for k, (i, _) in enumerate(claims) if env_id in members[i].config.env_ids]
+                if not takers:
+                    continue
+
                 def report(p: Progress, env_id=env_id):
                     for w in workers:
                         w.check_terminated()
@@ -210,13 +223,14 @@ def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None =
                         progress_fn(GenerationProgress(lead.generation, env_id, lead.completed, first.config.trials,
                                                        *_best(first.study), p))
 
-                results[env_id] = trainer.run(Population.concat(parts), report)
-            at = 0
-            for (i, claim), part in zip(claims, parts):
-                agents = np.arange(at, at + part.size)
-                at += part.size
+                trained = trainers[env_id].run(Population.concat([parts[k] for k in takers]), report)
+                at = 0
+                for k in takers:
+                    results[k][env_id] = trained.select(np.arange(at, at + parts[k].size))
+                    at += parts[k].size
+            for (i, claim), result in zip(claims, results):
                 m = members[i]
-                done, failed = tell_batch(m.study, claim.trials, {e: r.select(agents) for e, r in results.items()},
+                done, failed = tell_batch(m.study, claim.trials, {e: result[e] for e in m.config.env_ids},
                                           m.config, log)
                 workers[i].finished(claim.trials)
                 failed_in_a_row[i] = failed_in_a_row[i] + 1 if failed and not done else 0

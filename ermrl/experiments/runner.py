@@ -256,7 +256,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
 
     from ermrl.analysis.experiment_report import write_experiment_report
     from ermrl.evolution import convergence
-    from ermrl.evolution.evolve import Member, evolve_together, make_trainers, shape
+    from ermrl.evolution.evolve import Member, evolve_together, make_trainers, shared_envs
     from ermrl.evolution.selection import load_selection, select
     from ermrl.evolution.study import ATTR, make_sampler, open_study
     from ermrl.evolution.workers import WorkerConfig
@@ -288,15 +288,16 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
         log(f"[{i + 1}/{len(plans)}] {p.study}: evolve on {', '.join(p.config.env_ids)} ({p.config.trials} trials × "
             f"{p.config.seeds} seeds × {p.config.train.total_timesteps:,} steps, {p.spec.reservoirs} reservoir(s))")
         config, study = prepare(p)
-        if trials_done(p, study) < config.trials:  # with every later study of its shape still evolving, as one population
-            group = [q for q in plans[i:] if q is p or (shape(q.config) == shape(p.config)
+        if trials_done(p, study) < config.trials:  # with every later study still evolving on one of its envs alike
+            group = [q for q in plans[i:] if q is p or (shared_envs(q.config, p.config)
                                                          and trials_done(q, prepare(q)[1]) < q.config.trials)]
             if len(group) > 1:
-                log(f"    evolving {len(group)} studies as one population: {', '.join(q.spec.name for q in group)}")
+                log(f"    evolving {len(group)} studies together, one population per env: "
+                    f"{', '.join(q.spec.name for q in group)}")
             # no bar for a finished evolution: entering one prints "compiling" where nothing trains
             bar = progress(f"evolve {'+'.join(q.spec.name for q in group)}") if progress else None
             evolve_together([Member(prepare(q)[1], prepare(q)[0], WorkerConfig(until_converged=q.until_converged))
-                             for q in group], make_trainers(config),
+                             for q in group], make_trainers(*(prepare(q)[0] for q in group)),
                             (lambda g: bar(g.train) if g.train else None) if bar else None,
                             lambda line: log(f"    {line}"))
         stopped = convergence.recorded(study, p.until_converged) if p.until_converged else None

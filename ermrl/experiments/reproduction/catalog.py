@@ -17,7 +17,7 @@ ORDER = ("cartpole", "pendulum", "pendulum_medium", "pendulum_paper", "pendulum_
          "pendulum_500u_more_seeds", "pendulum_100u_near_default_wide", "deterministic_eval", "pendulum_rlzoo_ppo",
          "pendulum_normalize", "pendulum_rlzoo_sde", "pendulum_rlzoo_policy", "pendulum_rlzoo_evolve",
          "pendulum_rlzoo_lstm", "recurrent_vs_ermrl", "other_hps", "h2_converged", "h2_converged_interim",
-         "h3_converged", "c8_converged", "c3_converged")
+         "h3_converged", "h3_converged_interim", "c8_converged", "c3_converged")
 """The steps' names in the order they run when none is named: a step reads what the steps before it wrote."""
 CLAIMS = tuple(f"C{i}" for i in range(1, 18))
 

@@ -13,7 +13,7 @@ TRIO = ("ant", "halfcheetah", "swimmer")
 
 def steps() -> list[Step]:
     return [h2(), c8(), fft(), fft_early(), h3(), humanoid(), c13(), c16(), hpmap(), c11(), c11_2res(),
-            h2_converged(), h2_converged_interim(), h3_converged(), c8_converged()]
+            h2_converged(), h2_converged_interim(), h3_converged(), h3_converged_interim(), c8_converged()]
 
 
 def h2() -> Step:
@@ -36,25 +36,54 @@ from}: a study ahead of its end, while it runs on (add a task once its study has
 
 
 def h2_converged_interim() -> Step:
-    actions = []
-    for task, generation in SO_FAR.items():
-        d, study = f"{CONVERGED}/{task}-gen{generation}", f"locomotion-converged-{task}-2res"
-        where, label = ("--study", study, "--storage", f"{d}/studies.log"), f"converged study, generation {generation}"
-        actions += [
-            python("paper/study_so_far.py", "--study", study, "--storage", f"journal:{CONVERGED}/studies.log",
-                   "--generation", generation, "--to", f"journal:{d}/studies.log", skip_if=made(f"{d}/studies.log")),
-            ermrl("select", where, "--out", f"runs/{study}-gen{generation}", "--top", 5, "--seeds", 5, "--quiet"),
-            ermrl("test", where, "--out", d, "--seeds", 10, "--timesteps", 1000000, "--auc-steps", 300000,
-                  "--baseline-store", "docs/data/baseline-models", NOT_SAVED, skip_if=made(f"{d}/test/summary.json")),
-            compare(f"{label}={d}/test/summary.json", f"small study={SMALL}/{task}-2res/test/summary.json",
-                    "--compare", label, "PPO (same observation)", "--compare", label, "small study",
-                    "--title", f"Φ* after {generation + 1} CMA-ES generations",
-                    "--figure", f"{d}/comparison.png", tee=f"{d}/comparison.md")]
+    actions = [_interim(f"locomotion-converged-{task}-2res", CONVERGED, f"{task}-gen{generation}", generation,
+                        f"{SMALL}/{task}-2res/test/summary.json") for task, generation in SO_FAR.items()]
     so_far = ", ".join(f"{task} after generation {generation}" for task, generation in SO_FAR.items())
     return step("h2_converged_interim", "C7", f"h2_converged's studies ahead of their end ({so_far}): each "
                 "study's trials up to a generation copied aside (paper/study_so_far.py), the top 5 re-evaluated "
                 "on 5 seeds, Φ* tested 10 × 1M against PPO (from the store), and compared with the small study's "
                 "Φ*", actions)
+
+
+GENERALIZATION = "docs/data/generalization-morphology-converged"
+GENERALIZATION_SO_FAR = {"Ant-v5": 21}
+"""{held-out env: the last generation of its converged-scale C10 study that ``h3_converged_interim`` selects and
+tests from}, as :data:`SO_FAR` for C7."""
+
+
+def h3_converged_interim() -> Step:
+    actions = []
+    for env, generation in GENERALIZATION_SO_FAR.items():
+        task = env.removesuffix("-v5").lower()
+        actions.append(_interim(f"generalization-morphology-converged-to-{task}", GENERALIZATION,
+                                f"to-{task}-gen{generation}", generation,
+                                f"docs/data/generalization-morphology-small/to-{task}/test-{env}/summary.json", env))
+    so_far = ", ".join(f"to-{env.removesuffix('-v5').lower()} after generation {g}"
+                       for env, g in GENERALIZATION_SO_FAR.items())
+    return step("h3_converged_interim", "C10", f"h3_converged's studies ahead of their end ({so_far}): as "
+                "h2_converged_interim, the top 5 re-evaluated on 5 seeds on the two evolution envs, Φ* tested "
+                "10 × 1M on the held-out env against PPO (from the store) and the small study's Φ*", actions)
+
+
+def _interim(study: str, journal_dir: str, name: str, generation: int, small_summary: str,
+             test_env: str | None = None) -> tuple:
+    """The actions that select and test ``study`` as it stood after ``generation``, in ``journal_dir/name``: its
+    trials copied aside, the top 5 on 5 seeds, Φ* 10 × 1M (on ``test_env``, else the evolution's env) against PPO
+    and the small study's Φ* (``small_summary``)."""
+    d = f"{journal_dir}/{name}"
+    where, label = ("--study", study, "--storage", f"{d}/studies.log"), f"converged study, generation {generation}"
+    test = f"{d}/test-{test_env}" if test_env else f"{d}/test"
+    return (
+        python("paper/study_so_far.py", "--study", study, "--storage", f"journal:{journal_dir}/studies.log",
+               "--generation", generation, "--to", f"journal:{d}/studies.log", skip_if=made(f"{d}/studies.log")),
+        ermrl("select", where, "--out", f"runs/{study}-gen{generation}", "--top", 5, "--seeds", 5, "--quiet"),
+        ermrl("test", where, "--out", d, *(("--env", test_env) if test_env else ()), "--seeds", 10, "--timesteps",
+              1000000, "--auc-steps", 300000, "--baseline-store", "docs/data/baseline-models", NOT_SAVED,
+              skip_if=made(f"{test}/summary.json")),
+        compare(f"{label}={test}/summary.json", f"small study={small_summary}",
+                "--compare", label, "PPO (same observation)", "--compare", label, "small study",
+                "--title", f"Φ* after {generation + 1} CMA-ES generations",
+                "--figure", f"{d}/comparison.png", tee=f"{d}/comparison.md"))
 
 
 def h3_converged() -> Step:
