@@ -25,6 +25,13 @@ import tempfile
 import time
 
 
+def _space(reservoirs: int):
+    """The search space: (sr, lr) with iss fixed at 1.0 for one reservoir, all 3K parameters for K > 1."""
+    from ermrl.evolution.search_space import SearchSpace
+
+    return SearchSpace(reservoirs=reservoirs, fixed_iss=1.0 if reservoirs == 1 else None)
+
+
 def run_mode(mode: str, args) -> list:
     """Evolves the studies in ``mode`` in this process; returns every study's (params, value) per trial."""
     import optuna
@@ -33,7 +40,6 @@ def run_mode(mode: str, args) -> list:
     from ermrl.compile_cache import enable
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.evolve import Member, evolve, evolve_together
-    from ermrl.evolution.search_space import SearchSpace
     from ermrl.evolution.study import make_sampler, open_study
     from ermrl.evolution.record import encode_study_record
     from ermrl.evolution.scoring import Baseline
@@ -41,17 +47,17 @@ def run_mode(mode: str, args) -> list:
 
     enable()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    agent = AgentConfig(reservoirs=args.reservoirs)
-    space = SearchSpace(reservoirs=args.reservoirs, fixed_iss=1.0 if args.reservoirs == 1 else None)
+    space = _space(args.reservoirs)
     popsize = space.default_popsize()
     if args.groups:  # study k leaves env k out and evolves on the others; the constants only scale the nScore
         envs = [tuple(e for e in args.groups if e != held) for held in args.groups]
+        extra = [{"envs": e, "baselines": tuple(Baseline(x, 0.0, 0.0, 1.0) for x in e)} for e in envs]
     else:
-        envs = [(args.env,)] * args.studies
-    configs = [EvolveConfig(train=TrainConfig(env_id=e[0], total_timesteps=args.timesteps, agent=agent), space=space,
-                            trials=popsize * (args.generations + 1), seeds=3, sampler_seed=k, envs=e if len(e) > 1
-                            else (), baselines=tuple(Baseline(x, 0.0, 0.0, 1.0) for x in e) if len(e) > 1 else ())
-               for k, e in enumerate(envs)]
+        envs, extra = [(args.env,)] * args.studies, [{}] * args.studies
+    configs = [EvolveConfig(train=TrainConfig(env_id=e[0], total_timesteps=args.timesteps,
+                                              agent=AgentConfig(reservoirs=args.reservoirs)),
+                            space=space, trials=popsize * (args.generations + 1), seeds=3, sampler_seed=k, **x)
+               for k, (e, x) in enumerate(zip(envs, extra))]
     folder = tempfile.mkdtemp()
     studies = [open_study(f"sqlite:///{folder}/s{k}.db", f"s{k}", make_sampler("cmaes", popsize, k),
                           encode_study_record(c))
@@ -92,10 +98,7 @@ def main() -> None:
                 times[mode].append(time.perf_counter() - start)
             trials[mode] = json.loads(out.strip().splitlines()[-1])
     apart, together = (statistics.median(times[m]) for m in ("apart", "together"))
-    from ermrl.evolution.search_space import SearchSpace
-
-    agents = 3 * SearchSpace(reservoirs=args.reservoirs, fixed_iss=1.0 if args.reservoirs == 1 else None)\
-        .default_popsize()
+    agents = 3 * _space(args.reservoirs).default_popsize()
     studies, envs = (3, 2) if args.groups else (args.studies, 1)
     agent_steps = studies * envs * (args.generations + 1) * agents * args.timesteps
     work = (f"3 groups × {args.generations + 1} generations × 2 envs × {agents} agents" if args.groups else
@@ -103,6 +106,7 @@ def main() -> None:
     print(f"| {' + '.join(args.groups) if args.groups else args.env} | {work} × {args.timesteps:,} | "
           f"{apart:.1f} s ({agent_steps / apart:,.0f}/s) | {together:.1f} s ({agent_steps / together:,.0f}/s) | "
           f"{apart / together:.2f}× | {'same' if trials['apart'] == trials['together'] else 'DIFFERENT'} |")
+
 
 if __name__ == "__main__":
     main()

@@ -46,20 +46,18 @@ def h2_converged_interim() -> Step:
 
 
 GENERALIZATION = "docs/data/generalization-morphology-converged"
-GENERALIZATION_SO_FAR = {"Ant-v5": 21}
-"""{held-out env: the last generation of its converged-scale C10 study that ``h3_converged_interim`` selects and
-tests from}, as :data:`SO_FAR` for C7."""
+GENERALIZATION_SO_FAR = {"ant": 21}
+"""{held-out task: the last generation of its converged-scale C10 study (``to-TASK``) that ``h3_converged_interim``
+selects and tests from}, as :data:`SO_FAR` for C7."""
+ENV_IDS = {"ant": "Ant-v5", "halfcheetah": "HalfCheetah-v5", "swimmer": "Swimmer-v5"}
+"""The env of each task of :data:`TRIO`."""
 
 
 def h3_converged_interim() -> Step:
-    actions = []
-    for env, generation in GENERALIZATION_SO_FAR.items():
-        task = env.removesuffix("-v5").lower()
-        actions.append(_interim(f"generalization-morphology-converged-to-{task}", GENERALIZATION,
-                                f"to-{task}-gen{generation}", generation,
-                                f"docs/data/generalization-morphology-small/to-{task}/test-{env}/summary.json", env))
-    so_far = ", ".join(f"to-{env.removesuffix('-v5').lower()} after generation {g}"
-                       for env, g in GENERALIZATION_SO_FAR.items())
+    actions = [_interim(f"generalization-morphology-converged-to-{task}", GENERALIZATION, f"to-{task}-gen{generation}",
+                        generation, f"docs/data/generalization-morphology-small/to-{task}/test-{ENV_IDS[task]}/"
+                        "summary.json", ENV_IDS[task]) for task, generation in GENERALIZATION_SO_FAR.items()]
+    so_far = ", ".join(f"to-{task} after generation {g}" for task, g in GENERALIZATION_SO_FAR.items())
     return step("h3_converged_interim", "C10", f"h3_converged's studies ahead of their end ({so_far}): as "
                 "h2_converged_interim, the top 5 re-evaluated on 5 seeds on the two evolution envs, Φ* tested "
                 "10 × 1M on the held-out env against PPO (from the store) and the small study's Φ*", actions)
