@@ -56,6 +56,8 @@ CASES = [
                             "'jax', 'mujoco', 'host'); see `ermrl train --help`"),
     ("train --env-threads 0", "ermrl train: error: argument --env-threads: must be 'auto' or an integer in 1..4096, "
                               "got '0'; see `ermrl train --help`"),
+    ("train --processes 0", "ermrl train: error: argument --processes: must be an integer in 1..256, got '0'; see "
+                            "`ermrl train --help`"),
     ("train --env LunarLander-v3 --backend mujoco", "ermrl train: error: env 'LunarLander-v3' has no batched MuJoCo "
      "version; use --backend host or auto (the MuJoCo backend runs: Ant-v5, HalfCheetah-v5, Hopper-v5, Humanoid-v5, "
      "HumanoidStandup-v5, Swimmer-v5, Walker2d-v5)"),
@@ -165,7 +167,7 @@ CASES = [
      "activation, backend, batch-size, bias, bias-scaling, clip-range, ent-coef, env, env-threads, env-workers, "
      "feed-action, first-seed, gae-lambda, gamma, input-connectivity, iss, leak-rate, learning-rate, lstm-hidden, "
      "lstm-seq-len, max-grad-norm, model, n-envs, n-epochs, n-steps, net-arch, no-reservoir, normalize, "
-     "observed-units, ortho-init, out, preset, quiet, rc-connectivity, reservoirs, save-agents, sde-sample-freq, "
+     "observed-units, ortho-init, out, preset, processes, quiet, rc-connectivity, reservoirs, save-agents, sde-sample-freq, "
      "seeds, skip-connection, snapshot-every, sr, tensorboard, timesteps, units, use-sde, vf-coef"),
     ("train --config str.toml", "ermrl train: error: config file str.toml: units has the wrong type: 'ten'; give an "
                                 "integer"),

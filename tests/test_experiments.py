@@ -370,3 +370,24 @@ def test_the_converged_scale_estimates_the_trial_limit_and_the_typical_convergen
     assert len(lines("converged", "ant-1res", 0)[0]) == 2  # one reservoir: no caveat
     paper, _ = lines("paper", "ant-2res", 27)  # a scale without convergence: the one line, no trial-limit clause
     assert len(paper) == 1 and paper[0].endswith("already done)")
+
+
+def test_runtime_settings_reach_every_study_and_a_study_resumes_under_other_ones(tmp_path):
+    """`experiment run --env-workers/--env-threads/--processes` set every study's training (before,
+    --env-threads was parsed and dropped); like the env workers, none of them is part of a study's config, so a
+    study started under one value resumes under another."""
+    import dataclasses
+
+    from ermrl.evolution.study import make_sampler, open_study
+
+    plans = runner.plan(registry.get("locomotion"), registry.get_scale("smoke"), tmp_path, "auto", 0,
+                        runner.TestBudget(), env_threads=1, processes=2)
+    assert {(p.config.train.env_workers, p.config.train.env_threads, p.config.train.processes) for p in plans} == \
+        {(0, 1, 2)}
+    config = plans[0].config
+    url = f"journal:{tmp_path / 'studies.log'}"
+    sampler = lambda: make_sampler(config.sampler, config.generation_size, config.sampler_seed)
+    open_study(url, "s", sampler(), encode_study_record(config))
+    other = dataclasses.replace(config, train=dataclasses.replace(config.train, env_workers="auto",
+                                                                   env_threads="auto", processes=1))
+    assert open_study(url, "s", sampler(), encode_study_record(other)).study_name == "s"

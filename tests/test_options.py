@@ -37,7 +37,8 @@ def test_every_training_command_takes_every_agent_option_from_one_definition():
                          "feed_action": AgentConfig.feed_action, "skip_connection": False,
                          "observed_units": AgentConfig.observed_units, "preset": "sb3", "learning_rate": None,
                          "timesteps": TrainConfig.total_timesteps, "backend": TrainConfig.backend,
-                         "env_workers": TrainConfig.env_workers, "env_threads": "auto", "normalize": None, "use_sde": None,
+                         "env_workers": TrainConfig.env_workers, "env_threads": "auto", "processes": 1, "normalize": None,
+                         "use_sde": None,
                          "sde_sample_freq": None, "activation": None, "ortho_init": None, "net_arch": None,
                          **dict.fromkeys(PPO_FIELDS)}  # None: the preset's value
     assert set(expected_defaults) == set(AGENT_DESTS)

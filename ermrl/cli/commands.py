@@ -63,6 +63,9 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--env-workers", type=options.workers, default=None, metavar="N|auto",
                    help="host envs: processes that step them (0: the main process; default: the evolution's "
                         "setting); results do not depend on it")
+    p.add_argument("--processes", type=options.processes, default=None, metavar="N",
+                   help="host-loop backends: processes that train each model's agents at once (default: the "
+                        "evolution's setting); results do not depend on it")
     common.config_and_quiet(p)
 
     p = sub.add_parser("report", help="write a self-contained HTML report of a study",
@@ -288,7 +291,7 @@ def cmd_test(args) -> int:
         rows = run_test_phase(study, out, test, progress, save_agents=args.save_agents, log=print,
                               on_results=lambda label, results: models.append((label, results)),
                               agents_per_run=args.agents_per_run, env_workers=args.env_workers,
-                              baseline_store=args.baseline_store)
+                              baseline_store=args.baseline_store, processes=args.processes)
     finally:
         close()
     if args.tensorboard is not None:
@@ -339,7 +342,7 @@ def cmd_baselines(args) -> int:
     try:  # vanilla PPO trains with every PPO setting given (--gamma, --preset, ...), as the evolution's agents
         found = baseline_runs.ensure(args.env, args.timesteps, args.seeds, rate, args.table, print, progress,
                                      args.backend, args.env_workers, args.random_episodes, args.recompute,
-                                     baselines.ppo_settings(ppo))
+                                     baselines.ppo_settings(ppo), args.env_threads, args.processes)
     finally:
         close()
     for env_id, b in found.items():

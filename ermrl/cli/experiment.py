@@ -105,7 +105,8 @@ def _run(args) -> int:
     folder = storage.check_folder(args.out or runner.experiment_dir(experiment, scale))
     if args.baseline_store is not None:
         storage.check_folder(args.baseline_store, "--baseline-store")
-    plans = [p for p in runner.plan(experiment, scale, folder, args.backend, args.env_workers, budget)
+    plans = [p for p in runner.plan(experiment, scale, folder, args.backend, args.env_workers, budget, args.env_threads,
+                                    args.processes)
              if not args.only or p.spec.name in args.only]
     table = None
     if any(p.config.normalized for p in plans):  # a damaged table fails now, not after the first studies
@@ -140,7 +141,8 @@ def _run(args) -> int:
     progress, close = bars(args.quiet)
     try:
         report = runner.run_experiment(experiment, scale, folder, url, args.backend, args.env_workers, tuple(args.only),
-                                       print, progress, args.baselines, budget, args.baseline_store)
+                                       print, progress, args.baselines, budget, args.baseline_store,
+                                       args.env_threads, args.processes)
     finally:
         close()
     print(f"report: {report.resolve()}")

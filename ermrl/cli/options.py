@@ -163,6 +163,19 @@ def threads(value: str):
     return _auto_or_count(value, 1, 4096)
 
 
+def processes(value: str) -> int:
+    """argparse type of --processes: an integer in 1..MAX_PROCESSES."""
+    from ermrl.training.config import MAX_PROCESSES
+
+    try:
+        n = int(value)
+    except ValueError:
+        n = None
+    if n is None or not 1 <= n <= MAX_PROCESSES:
+        raise argparse.ArgumentTypeError(f"must be an integer in 1..{MAX_PROCESSES}, got {value!r}")
+    return n
+
+
 def workers(value: str):
     """argparse type of --env-workers: 'auto' or an integer >= 0."""
     return _auto_or_count(value, 0)
@@ -188,7 +201,8 @@ def _groups() -> dict[str, list[Option]]:
         "env": [Option("--timesteps", TrainConfig, "total_timesteps", kwargs={"type": int}),
                 Option("--backend", TrainConfig, "backend", kwargs={"choices": ["auto", "jax", "mujoco", "host"]}),
                 Option("--env-workers", TrainConfig, "env_workers", kwargs={"type": workers, "metavar": "N|auto"}),
-                Option("--env-threads", TrainConfig, "env_threads", kwargs={"type": threads, "metavar": "N|auto"})],
+                Option("--env-threads", TrainConfig, "env_threads", kwargs={"type": threads, "metavar": "N|auto"}),
+                Option("--processes", TrainConfig, "processes", kwargs={"type": processes, "metavar": "N"})],
         "agent": [
             Option("--reservoirs", AgentConfig, "reservoirs", kwargs={"type": int}),
             Option("--units", ReservoirSpec, "units", kwargs={"type": int}),
@@ -282,7 +296,7 @@ PPO_SWITCHES = ("normalize", "use_sde", "sde_sample_freq", "activation", "ortho_
 
 AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connectivity", "bias_scaling", "feed_action",
                "skip_connection", "observed_units", "preset", "learning_rate", *PPO_FIELDS, *PPO_SWITCHES, "net_arch",
-               "timesteps", "backend", "env_workers", "env_threads")
+               "timesteps", "backend", "env_workers", "env_threads", "processes")
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
 
@@ -411,7 +425,7 @@ def train_config(args, env_id: str, reservoirs: int | None = None):
 
     return TrainConfig(env_id=env_id, total_timesteps=args.timesteps, agent=agent_config(args, reservoirs),
                        ppo=ppo_config(args), backend=args.backend, env_workers=args.env_workers,
-                       env_threads=args.env_threads)
+                       env_threads=args.env_threads, processes=args.processes)
 
 
 def search_space(args):

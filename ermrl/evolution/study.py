@@ -319,12 +319,12 @@ def _current(record: dict) -> dict:
 
 def _comparable(record: dict) -> str:
     """The config without the fields that may change between a run and its resumption: the trial target, the
-    baselines (a resumed study keeps the constants it started with) and the number of env worker processes
-    (results do not depend on it). A worker's own settings (``workers.WorkerConfig``: batch, index, heartbeats)
-    are not in the record at all."""
+    baselines (a resumed study keeps the constants it started with) and the env workers, threads and training
+    processes (results do not depend on them). A worker's own settings (``workers.WorkerConfig``: batch, index,
+    heartbeats) are not in the record at all."""
     keep = {k: v for k, v in record.items() if k not in ("trials", "baselines")}
     if isinstance(keep.get("train"), dict):
-        keep["train"] = {k: v for k, v in keep["train"].items() if k not in ("env_workers", "env_threads")}
+        keep["train"] = {k: v for k, v in keep["train"].items() if k not in ("env_workers", "env_threads", "processes")}
     return json.dumps(keep, sort_keys=True, default=str)
 
 

@@ -34,9 +34,10 @@ def _flags(settings: dict) -> list[str]:
 def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path: Path | None,
            log: Callable[[str], None], progress: Callable | None = None, backend: str = "auto",
            env_workers="auto", random_episodes: int = 100, recompute: bool = False,
-           settings: dict | None = None) -> dict[str, "bl.Baseline"]:
+           settings: dict | None = None, env_threads="auto", processes: int = 1) -> dict[str, "bl.Baseline"]:
     """Each env's Baseline at this budget and PPO setting (``settings``: :func:`baselines.ppo_settings` of the
-    evolution's PPO, beside ``learning_rate``); missing random or PPO entries are computed and saved first."""
+    evolution's PPO, beside ``learning_rate``); missing random or PPO entries are computed and saved first, PPO's
+    trained as ``backend``, ``env_workers``, ``env_threads`` and ``processes`` say (TrainConfig's fields)."""
     settings = settings or {}
     table_path = table_path or bl.default_table()
     table = bl.load_table(table_path)
@@ -58,7 +59,8 @@ def ensure(env_ids, timesteps: int, seeds: int, learning_rate: float, table_path
             log(f"baselines: vanilla PPO on {env_id} ({seeds} seeds × {timesteps:,} steps, learning rate "
                 f"{learning_rate:g}{shown})")
             fn = progress(f"PPO baseline {env_id}") if progress else None
-            p = bl.ppo_fitness(env_id, timesteps, seeds, learning_rate, backend, env_workers, fn, settings)
+            p = bl.ppo_fitness(env_id, timesteps, seeds, learning_rate, backend, env_workers, fn, settings,
+                               env_threads, processes)
             table.add_ppo(env_id, p, _command(["baselines", "--env", env_id, "--timesteps", str(timesteps),
                                                "--seeds", str(seeds), "--learning-rate", f"{learning_rate:g}",
                                                *_flags(settings)]))
@@ -105,7 +107,8 @@ def with_baselines(config, table_path: Path | None, storage_url: str, study_name
         pass
     found = ensure(config.env_ids, config.train.total_timesteps, config.seeds, config.train.ppo.learning_rate,
                    table_path, log, progress, config.train.backend, config.train.env_workers,
-                   settings=bl.ppo_settings(config.train.ppo))
+                   settings=bl.ppo_settings(config.train.ppo), env_threads=config.train.env_threads,
+                   processes=config.train.processes)
     constants = tuple(found[e] for e in config.env_ids)
     if not allow_weak:
         check_informative(constants, config.normalization, advice)

@@ -108,9 +108,11 @@ def random_scores(env_id: str, episodes: int = 100, seed: int = 0) -> RandomScor
 
 
 def ppo_fitness(env_id: str, timesteps: int, seeds: int, learning_rate: float = 3e-4, backend: str = "auto",
-                env_workers="auto", progress_fn=None, settings: dict | None = None) -> PPOScore:
+                env_workers="auto", progress_fn=None, settings: dict | None = None, env_threads="auto",
+                processes: int = 1) -> PPOScore:
     """Vanilla PPO (no reservoir) on ``env_id`` over seeds 0..seeds−1, the evolution's fitness definition, with
-    SB3's PPO defaults but ``learning_rate`` and ``settings`` (:func:`ppo_settings` of the evolution's PPO)."""
+    SB3's PPO defaults but ``learning_rate`` and ``settings`` (:func:`ppo_settings` of the evolution's PPO).
+    ``backend``, ``env_workers``, ``env_threads`` and ``processes``: how it trains (TrainConfig's fields)."""
     from ermrl.agent import AgentConfig, Phi
     from ermrl.training import Population, TrainConfig, Trainer
 
@@ -118,7 +120,7 @@ def ppo_fitness(env_id: str, timesteps: int, seeds: int, learning_rate: float = 
         raise ConfigError(f"`seeds` must be >= 1, got {seeds}", owner=ppo_fitness)
     config = TrainConfig(env_id=env_id, total_timesteps=timesteps, agent=AgentConfig(reservoirs=0),
                          ppo=_ppo_config(learning_rate, settings), backend=backend,
-                         env_workers=env_workers)
+                         env_workers=env_workers, env_threads=env_threads, processes=processes)
     fit = Trainer(config).run(Population.grid(Phi(1.0, 1.0, 1.0), seeds, learning_rate, 0), progress_fn).fitness()
     if not np.isfinite(fit).any():
         raise ConfigError(f"vanilla PPO finished no episode on {env_id} in {timesteps} steps; use a larger budget")

@@ -134,7 +134,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
                    log: Callable[[str], None] | None = None,
                    on_results: Callable[[str, object], None] | None = None,
                    agents_per_run: int | None = None, snapshot_every_s: float = 300.0,
-                   env_workers: int | str | None = None, baseline_store: Path | None = None) -> list[dict]:
+                   env_workers: int | str | None = None, baseline_store: Path | None = None,
+                   processes: int | None = None) -> list[dict]:
     """Trains the models and writes curves.csv, summary.json/.csv, test_config.json and test_phase.png/.svg
     into ``out`` (checked before any training, written all at once at the end: :func:`ermrl.storage.staged_folder`),
     and with ``save_agents`` every agent's final policy in ``out/agents/MODEL/seedS.npz`` (MODEL:
@@ -158,7 +159,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     seconds (:mod:`ermrl.training.snapshots`): a rerun after a stop continues it from there, to the same results,
     telling ``log`` "resumed from ...".
 
-    ``env_workers`` (host envs: 0, N or 'auto') overrides the evolution's setting; results do not depend on it.
+    ``env_workers`` (host envs: 0, N or 'auto') and ``processes`` (``TrainConfig.processes``) override the
+    evolution's settings; results do not depend on them.
 
     ``baseline_store`` (a folder): the PPO baselines are looked up there before training, and kept there once
     trained, so that another test phase with the same baseline (same env, seeds, budget and PPO settings, any Φ*)
@@ -174,6 +176,8 @@ def run_test_phase(study: optuna.Study, out: Path, test: TestConfig,
     storage.check_folder(storage.check_rerun_folder(out, "test"))
     if env_workers is not None:
         base = dataclasses.replace(base, env_workers=env_workers)
+    if processes is not None:
+        base = dataclasses.replace(base, processes=processes)
     k = config.space.reservoirs
     rates = test.learning_rates or (config.train.ppo.learning_rate,)
     baselines = baseline_jobs(base, seeds, baseline_rate, test.recurrent_baseline)

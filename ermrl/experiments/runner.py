@@ -109,8 +109,10 @@ def default_storage(folder: Path) -> str:
 
 
 def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "auto",
-         env_workers: int | str = "auto", budget: TestBudget = TestBudget()) -> list[StudyPlan]:
-    """Every study of ``experiment`` at ``scale``, its test phases at ``budget``'s overrides of the scale's."""
+         env_workers: int | str = "auto", budget: TestBudget = TestBudget(), env_threads: int | str = "auto",
+         processes: int = 1) -> list[StudyPlan]:
+    """Every study of ``experiment`` at ``scale``, its test phases at ``budget``'s overrides of the scale's.
+    ``backend``, ``env_workers``, ``env_threads`` and ``processes`` go to every study's TrainConfig."""
     plans = []
     for spec in experiment.studies:
         agent = AgentConfig(reservoirs=spec.reservoirs, spec=ReservoirSpec(units=spec.units),
@@ -118,7 +120,7 @@ def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "aut
         ppo = dataclasses.replace(SB3_DEFAULTS, learning_rate=spec.evolve_learning_rate)
         trial_steps = scale.timesteps if scale.wiring_only else max(scale.timesteps, spec.min_trial_timesteps)
         train = TrainConfig(env_id=spec.envs[0], total_timesteps=trial_steps, agent=agent, ppo=ppo,
-                            backend=backend, env_workers=env_workers)
+                            backend=backend, env_workers=env_workers, env_threads=env_threads, processes=processes)
         config = EvolveConfig(train=train, space=SearchSpace(spec.reservoirs, fixed_iss=spec.fixed_iss),
                               trials=scale.trials, seeds=scale.seeds, popsize=scale.popsize,
                               envs=spec.envs if len(spec.envs) > 1 else ())
@@ -246,7 +248,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
                    backend: str = "auto", env_workers: int | str = "auto", only: tuple[str, ...] = (),
                    log: Callable[[str], None] = print, progress: Callable | None = None,
                    baselines_table: Path | None = None, budget: TestBudget = TestBudget(),
-                   baseline_store: Path | None = None) -> Path:
+                   baseline_store: Path | None = None, env_threads: int | str = "auto", processes: int = 1) -> Path:
     """Runs (or resumes) every study of ``experiment`` (or those named in ``only``); returns the report's path.
     Studies over several envs take their constants from ``baselines_table`` (default runs/baselines.json over
     the shipped table), computing the missing ones first. ``budget`` overrides the test phases' budgets; a test
@@ -264,7 +266,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
     from ermrl.experiments.evaluation import run_test_phase, test_dir
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    plans = [p for p in plan(experiment, scale, folder, backend, env_workers, budget)
+    plans = [p for p in plan(experiment, scale, folder, backend, env_workers, budget, env_threads, processes)
              if not only or p.spec.name in only]
     url = storage_url or default_storage(folder)
     opened: dict[str, tuple] = {}
@@ -319,7 +321,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
                 f"{'s' if len(rates) > 1 else ''} {', '.join(f'{rate:g}' for rate in rates)}")
             rows = run_test_phase(study, out, t, progress, log=lambda s, where=where: log(f"{where}: {s}"),
                                   agents_per_run=budget.agents_per_run, env_workers=env_workers,
-                                  baseline_store=baseline_store)
+                                  baseline_store=baseline_store, processes=processes)
             for r in rows:
                 log(f"    test on {r['env_id']}: {r['model']}: final {r['final_mean']:.1f} ± {r['final_std']:.1f}"
                     if r["final_mean"] is not None else f"    test on {r['env_id']}: {r['model']}: all seeds diverged")

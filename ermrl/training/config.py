@@ -15,6 +15,8 @@ from ermrl.codec import OMIT_WHEN_DEFAULT
 
 MAX_TIMESTEPS = 1_000_000_000
 """The longest training budget per agent that a config accepts."""
+MAX_PROCESSES = 256
+"""The most processes one population may be trained in (``TrainConfig.processes``)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,6 +37,11 @@ class TrainConfig:
     env step costs more than the IPC). Results do not depend on it."""
     env_threads: int | str = dataclasses.field(default="auto", metadata={OMIT_WHEN_DEFAULT: True})
     """MuJoCo backend only: threads that step the envs ('auto': one per core). Results do not depend on it."""
+    processes: int = dataclasses.field(default=1, metadata={OMIT_WHEN_DEFAULT: True})
+    """Host-loop backends (``mujoco``, ``host``) only: processes that train the population at once, each a
+    contiguous part of its agents with its own JAX devices and envs (:mod:`ermrl.training.processes`; 1: this
+    process alone; the JAX backend, whose one process already keeps every core busy, and JAX on a GPU ignore it).
+    On 2 cores two train MuJoCo populations about 1.3× faster. Results do not depend on it."""
 
     def __post_init__(self):
         if self.total_timesteps < 1:
@@ -46,6 +53,8 @@ class TrainConfig:
             raise ConfigError(f"env workers must be 'auto' or an integer >= 0, got {self.env_workers!r}")
         if self.env_threads != "auto" and not (isinstance(self.env_threads, int) and 1 <= self.env_threads <= 4096):
             raise ConfigError(f"env threads must be 'auto' or an integer in 1..4096, got {self.env_threads!r}")
+        if not (isinstance(self.processes, int) and 1 <= self.processes <= MAX_PROCESSES):
+            raise ConfigError(f"processes must be an integer in 1..{MAX_PROCESSES}, got {self.processes!r}")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -56,11 +56,12 @@ class Snapshot(NamedTuple):
 
 
 def identity(train_config, population, n_devices: int) -> dict:
-    """What a run's state depends on, JSON-ready. The env workers and threads are left out: results do not depend
-    on them."""
+    """What a run's state depends on, JSON-ready. The env workers and threads and the processes are left out:
+    results do not depend on them."""
     train = storage.to_dict(train_config)
     train.pop("env_workers", None)
     train.pop("env_threads", None)
+    train.pop("processes", None)
     return json.loads(json.dumps({
         "train": train, "devices": n_devices, "seeds": np.asarray(population.seeds).tolist(),
         "learning_rates": np.asarray(population.learning_rate).tolist(),

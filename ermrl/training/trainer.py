@@ -162,10 +162,29 @@ class Trainer:
         With ``snapshot`` (a file path), the run's state is written there every ``snapshot_every_s`` seconds,
         and a run that finds a snapshot of the same config and population there continues from it, to the same
         Results as an unbroken run (:mod:`ermrl.training.snapshots`). The caller removes the file once it has
-        kept the Results. ``log`` gets a line when a run resumes or cannot."""
+        kept the Results. ``log`` gets a line when a run resumes or cannot.
+
+        With ``config.processes`` > 1 on a host-loop backend and JAX on the CPU, the agents train in that many
+        processes at once (:mod:`ermrl.training.processes`), to the same Results."""
+        memory.check(self.config, population.size, self.env.info.obs_dim, self.env.info.action.feature_dim)
+        if self.config.processes > 1 and self.host and population.size > 1:
+            from ermrl.training.processes import run_split
+
+            if self.devices[0].platform != "cpu":  # each process would claim the accelerator's memory
+                if log:
+                    log(f"processes = {self.config.processes} is for CPU machines; training in this process on "
+                        f"the {self.devices[0].platform.upper()}")
+                return self._run_here(population, progress_fn, snapshot, snapshot_every_s, log)
+            return run_split(self._run_here, self.config, population, self.config.processes, progress_fn, snapshot,
+                             snapshot_every_s, log)
+        return self._run_here(population, progress_fn, snapshot, snapshot_every_s, log)
+
+    def _run_here(self, population: Population, progress_fn: Callable[[Progress], None] | None = None,
+                  snapshot: Path | None = None, snapshot_every_s: float = 300.0,
+                  log: Callable[[str], None] | None = None) -> Results:
+        """``run`` in this process alone."""
         ppo = self.config.ppo
         n = population.size
-        memory.check(self.config, n, self.env.info.obs_dim, self.env.info.action.feature_dim)
         t0 = time.perf_counter()
         ident = None if snapshot is None else snapshots.identity(self.config, population, len(self.devices))
         try:
