@@ -109,3 +109,14 @@ def test_a_helper_process_ends_when_its_parent_is_killed(tmp_path):
     proc.kill()
     proc.communicate(timeout=30)
     assert _gone_within(helper, 10)
+
+
+def test_a_helper_process_killed_mid_run_stops_the_run_at_once_with_one_line(tmp_path):
+    """The first part would train for most of an hour more: the run notices the dead helper after its next
+    iteration (seconds; the timeout leaves room for the first part's compile on a loaded machine)."""
+    proc, helper = _start_and_find_helper(tmp_path)
+    os.kill(helper, signal.SIGKILL)
+    _, err = proc.communicate(timeout=180)
+    assert proc.returncode == 1, err
+    assert err.splitlines()[-1] == "ermrl train: error: a training process died (exit code -9); see its error above"
+    assert not (tmp_path / "run").exists()

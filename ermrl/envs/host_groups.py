@@ -16,14 +16,14 @@ classic control), and it checks itself: the replayed observation must equal the 
 
 from __future__ import annotations
 
-import socket
-import subprocess
 import sys
 import warnings
 from multiprocessing.connection import Connection
 from typing import NamedTuple
 
 import numpy as np
+
+from ermrl.child_interpreter import ChildDied, ChildInterpreter
 
 
 class Stepped(NamedTuple):
@@ -200,46 +200,28 @@ def serve(fd: int):
 
 
 class WorkerGroup:
-    """An EnvGroup living in its own process; ``send``/``receive`` split a call so groups step in parallel.
-
-    The worker is a fresh interpreter (``python -c``), not a multiprocessing child: fork is unsafe under JAX's
-    threads, and spawn would re-run the user's main script."""
+    """An EnvGroup living in its own process (a :class:`~ermrl.child_interpreter.ChildInterpreter`);
+    ``send``/``receive`` split a call so groups step in parallel."""
 
     def __init__(self, *args):
         self.first, self.size = args[3], args[4]
-        parent, child = socket.socketpair()
-        code = f"from ermrl.envs.host_groups import serve; serve({child.fileno()})"
-        self.process = subprocess.Popen([sys.executable, "-c", code], pass_fds=[child.fileno()])
-        child.close()
-        self.conn = Connection(parent.detach())
-        self.conn.send(args)
+        self.child = ChildInterpreter("ermrl.envs.host_groups", "an env worker process")
+        self.child.send(args)
         try:
-            ready = self.conn.recv()
-        except EOFError:
+            ready = self.child.receive()
+        except ChildDied:
             ready = None
         if ready != "ready":
             raise RuntimeError("an env worker process failed to start; see its error above")
 
     def send(self, command: str, *payload):
-        self.conn.send((command, *payload))
+        self.child.send((command, *payload))
 
     def receive(self):
-        try:
-            status, value = self.conn.recv()
-        except (EOFError, ConnectionResetError):
-            code = self.process.wait(timeout=5)
-            raise RuntimeError(f"an env worker process died (exit code {code}); see its error above") from None
+        status, value = self.child.receive()
         if status == "error":
             raise (ReplayMismatch if value.startswith(ReplayMismatch.__name__) else RuntimeError)(f"env worker: {value}")
         return value
 
     def close(self):
-        try:
-            self.conn.send(("close",))
-        except (BrokenPipeError, OSError):
-            pass
-        try:
-            self.process.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-        self.conn.close()
+        self.child.close(("close",))
