@@ -270,6 +270,8 @@ CASES = [
                           "leave --study out for `ermrl evolve` to name it"),
     ("evolve --out afile", "ermrl evolve: error: --out afile is a file, not a folder; give a folder path (it is "
                            "created if missing)"),
+    ("evolve --snapshots afile", "ermrl evolve: error: --snapshots afile is a file, not a folder; give a folder "
+                                 "path (it is created if missing)"),
     ("evolve --storage foo://db", "ermrl evolve: error: cannot open storage 'foo://db' (Can't load plugin: "
                                   "sqlalchemy.dialects:foo); use sqlite:///PATH.db, a journal file PATH.log, or a "
                                   "reachable database URL"),

@@ -98,8 +98,8 @@ def test_studies_that_share_one_env_train_it_as_one_population_and_get_the_trial
     sizes = {e: [] for e in trainers}
     for env_id, trainer in trainers.items():  # a spy on the real trainers: the population each round trains
         real = trainer.run
-        trainer.run = lambda population, report, real=real, env_id=env_id: (
-            sizes[env_id].append(population.size) or real(population, report))
+        trainer.run = lambda population, report, real=real, env_id=env_id, **kwargs: (
+            sizes[env_id].append(population.size) or real(population, report, **kwargs))
     together = [_open(tmp_path, f"together{k}", config) for k, config in enumerate(configs)]
     evolve_together([Member(study, config) for study, config in zip(together, configs)], trainers)
     for study, expected in zip(together, alone):
@@ -145,8 +145,9 @@ def test_a_kill_during_a_joint_generation_resumes_every_study(tmp_path):
             for k in range(2):
                 if not (tmp_path / f"s{k}.db").exists():
                     break
-                try:
-                    trials = optuna.load_study(study_name=f"s{k}", storage=f"sqlite:///{tmp_path}/s{k}.db").trials
+                try:  # read-only: a plain URL would create the tables the writer is creating ("already exists")
+                    trials = optuna.load_study(study_name=f"s{k}",
+                                               storage=f"sqlite:///file:{tmp_path}/s{k}.db?mode=ro&uri=true").trials
                 except Exception:  # not created yet, or locked by the writer
                     break
                 states.append([t.user_attrs.get("generation") for t in trials if t.state == TrialState.RUNNING])

@@ -64,7 +64,9 @@ def cmd_evolve(args) -> int:
                           sampler_seed=args.sampler_seed, envs=env_ids if len(env_ids) > 1 else (),
                           normalization=args.normalization, seed_schedule=args.seed_schedule)
     worker = WorkerConfig(args.batch, args.worker_index, args.heartbeat_interval, args.grace_period,
-                          options.convergence_rule(args))
+                          options.convergence_rule(args), args.snapshots)
+    if args.snapshots is not None:
+        storage.check_folder(args.snapshots, "--snapshots")
     agents = min(worker.batch or config.generation_size, config.trials) * config.seeds  # trained at once, per env
     for env_id, info in zip(env_ids, infos):
         memory.check(config.train_for(env_id), agents, info.obs_dim, info.action.feature_dim, "a generation")

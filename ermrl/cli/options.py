@@ -249,7 +249,8 @@ def _groups() -> dict[str, list[Option]]:
         "workers": [Option("--batch", WorkerConfig, "batch", kwargs={"type": int}),
                     Option("--worker-index", WorkerConfig, "worker_index", kwargs={"type": int}),
                     Option("--heartbeat-interval", WorkerConfig, "heartbeat_interval", kwargs={"type": int}),
-                    Option("--grace-period", WorkerConfig, "grace_period", kwargs={"type": int})],
+                    Option("--grace-period", WorkerConfig, "grace_period", kwargs={"type": int}),
+                    Option("--snapshots", WorkerConfig, "snapshots", kwargs={"type": path, "metavar": "DIR"})],
         "convergence": [
             Option("--until-converged", help="also stop once CMA-ES has converged: every searched parameter's spread "
                    "(the search distribution's standard deviation, in decades) below --converged-width for "

@@ -8,15 +8,20 @@ failed, with the reason in its user attribute ``failure``.
 
 Resuming: completed trials count toward ``trials``. Trials left RUNNING by a worker that is gone (killed, its
 machine lost) are failed once found so (its process gone from this machine: "interrupted"; else its heartbeat
-stale: "worker lost ..."; see :mod:`ermrl.evolution.heartbeat`) and their slots are trained again. A worker
-stopped by Ctrl-C or SIGTERM fails its own trials on the way out ("interrupted").
+stale: "worker lost ..."; see :mod:`ermrl.evolution.heartbeat`) and their slots are trained again, with their
+Φ asked again (:meth:`ermrl.evolution.workers.Worker.claim`). A worker stopped by Ctrl-C or SIGTERM fails its own
+trials on the way out ("interrupted"). With ``WorkerConfig.snapshots``, the batch's training is snapshotted
+every few minutes (:func:`batch_snapshot`), and the rerun that asks the same trials again continues it.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
+import json
 import time
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -136,6 +141,17 @@ def estimate_seconds(trainers: dict[str, Trainer], config: EvolveConfig, remaini
     return -(-remaining // batch) * sum(generation_seconds(t, config, batch) for t in trainers.values())
 
 
+def batch_snapshot(folder: Path, studies: list[str], env_id: str, population: Population) -> Path:
+    """The snapshot file of a batch's training on ``env_id``: FOLDER/STUDY/ENV.DIGEST.snapshot, in the folder of
+    its first study, with a digest of the studies and the population (Φ, seeds, learning rates), so that a rerun
+    asking the same trials again finds it, and no other batch does."""
+    key = json.dumps({"studies": studies, "env": env_id, "seeds": np.asarray(population.seeds).tolist(),
+                      "learning_rates": np.asarray(population.learning_rate).tolist(),
+                      "phi": [np.asarray(v).tolist() for v in population.phi]})
+    digest = hashlib.sha256(key.encode()).hexdigest()[:16]
+    return Path(folder) / studies[0] / f"{env_id.replace('/', '-')}.{digest}.snapshot"
+
+
 def make_trainers(*configs: EvolveConfig) -> dict[str, Trainer]:
     """One trainer (one compile per population size) for each env of the evolution, or of several evolutions
     trained together (each env trained as the first of them that evolves on it: they must agree, see
@@ -204,6 +220,12 @@ def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None =
                 else:
                     claims.append((i, claim))
             if not claims:
+                for m in members:  # snapshots of batches whose trials were never asked again
+                    if m.worker.snapshots is not None and (old := m.worker.snapshots / m.study.study_name).is_dir():
+                        for path in old.glob("*.snapshot*"):
+                            path.unlink(missing_ok=True)
+                        with contextlib.suppress(OSError):  # not empty: someone else's files
+                            old.rmdir()
                 return
             parts = [Population.concat([
                 Population.grid(phi, members[i].config.trial_seeds(g), members[i].config.train.ppo.learning_rate,
@@ -211,6 +233,7 @@ def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None =
                 for i, claim in claims]
             first, lead = members[claims[0][0]], claims[0][1]
             results: list[dict[str, Results]] = [{} for _ in claims]
+            kept: list[Path | None] = []  # the batch's snapshots, removed once its trials are told
             for env_id in env_ids:
                 takers = [k for k, (i, _) in enumerate(claims) if env_id in members[i].config.env_ids]
                 if not takers:
@@ -223,7 +246,13 @@ def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None =
                         progress_fn(GenerationProgress(lead.generation, env_id, lead.completed, first.config.trials,
                                                        *_best(first.study), p))
 
-                trained = trainers[env_id].run(Population.concat([parts[k] for k in takers]), report)
+                population = Population.concat([parts[k] for k in takers])
+                where = members[claims[takers[0]][0]].worker
+                path = None if where.snapshots is None else batch_snapshot(
+                    where.snapshots, [members[claims[k][0]].study.study_name for k in takers], env_id, population)
+                trained = trainers[env_id].run(population, report, snapshot=path,
+                                               snapshot_every_s=where.snapshot_every_s, log=log)
+                kept.append(path)
                 at = 0
                 for k in takers:
                     results[k][env_id] = trained.select(np.arange(at, at + parts[k].size))
@@ -242,3 +271,6 @@ def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None =
                     progress_fn(GenerationProgress(claim.generation, m.config.env_ids[0],
                                                    count(m.study, TrialState.COMPLETE), m.config.trials,
                                                    *_best(m.study), None))
+            for path in kept:
+                if path is not None:
+                    path.unlink(missing_ok=True)

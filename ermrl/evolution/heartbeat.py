@@ -39,6 +39,8 @@ HEARTBEAT_ATTR = "ermrl:heartbeat"
 WORKER_ATTR = "worker"
 """The trial user attribute naming the worker that trains it (``WorkerId.record``)."""
 INTERRUPTED = "interrupted"
+LOST_PREFIX = "worker lost"
+"""How the failure reason of a trial whose worker stopped beating begins."""
 INTERVAL_S = 10
 """Seconds between two heartbeats, by default."""
 GRACE_PERIOD_S = 60
@@ -120,7 +122,7 @@ class WorkerId:
                     now: float) -> str | None:
         """Why ``t`` (RUNNING, another worker's) is to be failed; None while its worker may be alive."""
         w = t.user_attrs.get(WORKER_ATTR)
-        lost = f"worker lost (no heartbeat for {grace_s} s)"
+        lost = f"{LOST_PREFIX} (no heartbeat for {grace_s} s)"
         if isinstance(w, dict) and self.same_machine(w) and isinstance(w.get("pid"), int) \
                 and process_gone(w["pid"], w.get("started")):
             return INTERRUPTED

@@ -16,6 +16,7 @@ import sys
 import threading
 import time
 import warnings
+from pathlib import Path
 from typing import Callable, Iterator
 
 import numpy as np
@@ -29,8 +30,8 @@ from ermrl.evolution import convergence
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.convergence import Convergence
 from ermrl.evolution.generations import ATTR, CMA_GENERATION, FULL, Ledger
-from ermrl.evolution.heartbeat import (GRACE_PERIOD_S, INTERRUPTED, INTERVAL_S, WORKER_ATTR, Heartbeat, WorkerId,
-                                       fail_lost, fail_trial, optuna_heartbeat)
+from ermrl.evolution.heartbeat import (GRACE_PERIOD_S, INTERRUPTED, INTERVAL_S, LOST_PREFIX, WORKER_ATTR, Heartbeat,
+                                       WorkerId, fail_lost, fail_trial, optuna_heartbeat)
 
 POLL_S = 1.0
 """Seconds between two looks at the study while waiting for a free slot."""
@@ -38,13 +39,31 @@ PLACE_POLL_S = 0.1
 """Seconds between two looks while another worker is asking a trial numbered below one of ours."""
 
 
+REDO_ATTR = "redo_of"
+"""The user attribute of a trial asked again with the Φ of a trial that a stopped or lost worker left failed:
+{"trial": its number, "generation": its generation}."""
+STALE_REDO = "its generation ended before it was redone"
+"""The failure reason of a trial asked again whose generation other workers finished meanwhile (CMA-ES)."""
+
+
 def _suggest(space, trial: optuna.Trial) -> Phi:
     """``space.suggest(trial)``, where the sampler's relative sampling runs. cmaes at popsize 2 (μ = 1) has no rank-μ
     update: one of the bounds it takes the minimum of divides by its zero learning rate (the minimum stays
-    finite), a numpy warning that users need not see."""
+    finite), a numpy warning that users need not see. A trial asked again (``REDO_ATTR``) has every parameter
+    given, where Optuna skips the relative sampling; it runs here all the same, so that CMA-ES tags the trial with
+    its generation (and tells it with that generation), and the given Φ is kept."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="divide by zero encountered in scalar divide", category=RuntimeWarning)
+        if REDO_ATTR in trial.user_attrs:
+            trial.relative_params  # noqa: B018 (the property samples and tags)
         return space.suggest(trial)
+
+
+def _stopped(t: FrozenTrial) -> bool:
+    """Whether ``t`` failed because its worker stopped or was lost, not because of its Φ."""
+    reason = t.user_attrs.get("failure")
+    return t.state == TrialState.FAIL and isinstance(reason, str) and (reason == INTERRUPTED
+                                                                        or reason.startswith(LOST_PREFIX))
 
 
 MAX_WAIT_S = 86_400
@@ -72,6 +91,13 @@ class WorkerConfig:
     until_converged: Convergence | None = None
     """Also stop once CMA-ES has converged by this rule (:mod:`ermrl.evolution.convergence`), recording it in
     the study; None: stop at the trial target only."""
+    snapshots: Path | None = None
+    """A folder for snapshots of the batch in training, one file per env, written every few minutes: a worker
+    stopped mid-batch (Ctrl-C, SIGTERM, a lost process) and rerun on this machine asks the stopped trials' Φ again
+    and continues their training from the last snapshot, to the fitness an unbroken batch gets. Without it a
+    stopped batch trains again from its start."""
+    snapshot_every_s: float = 300.0
+    """Seconds between two snapshots of a batch in training (with ``snapshots``)."""
 
     def __post_init__(self):
         if self.batch is not None and self.batch < 1:
@@ -87,6 +113,8 @@ class WorkerConfig:
         if max(self.heartbeat_interval, self.grace_period) > MAX_WAIT_S:
             raise ConfigError(f"`heartbeat_interval` and `grace_period` must be <= {MAX_WAIT_S} seconds (a day), "
                               f"got {self.heartbeat_interval} and {self.grace_period}", owner=type(self))
+        if not self.snapshot_every_s > 0:
+            raise ConfigError(f"`snapshot_every_s` must be > 0 (seconds), got {self.snapshot_every_s}", owner=type(self))
         if self.grace_period <= self.heartbeat_interval:
             raise ConfigError(f"`grace_period` ({self.grace_period} s) must be longer than `heartbeat_interval` "
                               f"({self.heartbeat_interval} s), or live trials would be failed as lost",
@@ -210,6 +238,7 @@ class Worker:
             slots = self.ledger.next_slots(trials)
             n = min(self.batch, need, slots.free if self.ledger.cma else self.batch)
             if n > 0:
+                self._redo(trials, slots.generation, n)
                 claim = self._ask(n, completed)
                 if claim is not None:
                     return claim
@@ -220,6 +249,18 @@ class Worker:
                 self.log(f"waiting: {reason}")
                 waiting = reason
             time.sleep(POLL_S)
+
+    def _redo(self, trials: list[FrozenTrial], generation: int, n: int) -> None:
+        """Enqueues, for the next asks, the Φ of at most ``n`` trials of ``generation`` that a stopped or lost
+        worker left failed and that nobody asked again yet (in number order), so that the generation trains the
+        candidates drawn for it, and a snapshot of their training (``WorkerConfig.snapshots``) fits them."""
+        names = set(self.config.space.distributions())
+        taken = {t.user_attrs[REDO_ATTR]["trial"] for t in trials if isinstance(t.user_attrs.get(REDO_ATTR), dict)}
+        todo = [t for t in trials if _stopped(t) and t.number not in taken and set(t.params) == names
+                and self.ledger.label(t) == generation][:n]
+        for t in todo:
+            self.study.enqueue_trial(t.params, user_attrs={REDO_ATTR: {"trial": t.number, "generation": generation}})
+            self.log(f"trial {t.number}'s Φ asked again")
 
     def _converged(self, trials: list[FrozenTrial]) -> bool:
         """Whether the study has converged by ``until_converged`` (recorded in the study and logged once)."""
@@ -280,6 +321,12 @@ class Worker:
                 if not self._survives(t, lambda t: t.set_user_attr(ATTR, 0 if tag is None else int(tag) + 1)):
                     del phis[t.number]
         placed = self._place([t for t in asked if t.number in phis])
+        for t in asked:  # a trial asked again in a later generation than its own: its Φ is not of this distribution
+            redo = t.user_attrs.get(REDO_ATTR) if placed.get(t.number, -1) >= 0 else None
+            if isinstance(redo, dict) and self.ledger.cma and placed[t.number] != redo["generation"]:
+                placed[t.number] = -1
+                if fail_trial(self.study, t._trial_id, STALE_REDO):
+                    self.log(f"trial {t.number} failed: {STALE_REDO}")
         kept = [t for t in asked if placed.get(t.number, -1) >= 0]
         for t in asked:
             if t not in kept:

@@ -36,6 +36,11 @@ WEIGHT_S = 0.2e-9
 those of 100-unit reservoirs."""
 
 
+EVOLUTION_SNAPSHOTS = "evolution.partial"
+"""The folder, in the experiment's, of the snapshots of the generations in training (``WorkerConfig.snapshots``):
+a stopped run, rerun, continues its generation where the last snapshot (every 5 minutes) left it."""
+
+
 @dataclasses.dataclass(frozen=True)
 class StudyPlan:
     """One study of an experiment at one scale, with everything needed to run it."""
@@ -298,7 +303,8 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
                     f"{', '.join(q.spec.name for q in group)}")
             # no bar for a finished evolution: entering one prints "compiling" where nothing trains
             bar = progress(f"evolve {'+'.join(q.spec.name for q in group)}") if progress else None
-            evolve_together([Member(prepare(q)[1], prepare(q)[0], WorkerConfig(until_converged=q.until_converged))
+            evolve_together([Member(prepare(q)[1], prepare(q)[0], WorkerConfig(until_converged=q.until_converged,
+                                                                                snapshots=folder / EVOLUTION_SNAPSHOTS))
                              for q in group], make_trainers(*(prepare(q)[0] for q in group)),
                             (lambda g: bar(g.train) if g.train else None) if bar else None,
                             lambda line: log(f"    {line}"))
