@@ -5,6 +5,7 @@ selections and test phases that are done with the same settings.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
 from pathlib import Path
@@ -308,6 +309,8 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
                              for q in group], make_trainers(*(prepare(q)[0] for q in group)),
                             (lambda g: bar(g.train) if g.train else None) if bar else None,
                             lambda line: log(f"    {line}"))
+            with contextlib.suppress(OSError):  # left empty once every study's snapshots are removed
+                (folder / EVOLUTION_SNAPSHOTS).rmdir()
         stopped = convergence.recorded(study, p.until_converged) if p.until_converged else None
         if stopped:
             log(f"    converged at generation {stopped['generation']} ({stopped['trials']} trials)")
