@@ -92,6 +92,23 @@ def test_a_stopped_run_resumes_to_the_same_results(tmp_path, env_id, backend, wo
     assert resumed.train_s > 0
 
 
+def test_a_run_that_ended_before_its_results_were_kept_trains_no_more(tmp_path):
+    """The snapshot written after the last iteration (snapshots every hour: this one alone) gives a rerun the
+    finished run's Results without an iteration: e.g. an evolution stopped between training a batch and telling it."""
+    ppo = TINY
+    config = TrainConfig(env_id="LunarLanderNoVel-v3", total_timesteps=4 * ppo.buffer_size,
+                         agent=AgentConfig(reservoirs=2), ppo=ppo, backend="host")
+    population = Population.grid(Phi(0.9, 0.3, 1.0), [3, 4], 3e-4, 2)
+    trainer = Trainer(config)
+    path = tmp_path / "run.snapshot"
+    finished = trainer.run(population, snapshot=path, snapshot_every_s=3600)
+    assert snapshots.read(path, snapshots.identity(config, population, len(trainer.devices))).iteration == 4
+    lines, iterations = [], []
+    again = trainer.run(population, iterations.append, snapshot=path, log=lines.append)
+    assert (lines, iterations) == ([f"resumed from {path} at iteration 4 of 4"], [])
+    assert_same_results(again, finished)
+
+
 def test_a_snapshot_holds_no_reservoir_weights_and_an_older_one_with_them_still_resumes(tmp_path):
     """The reservoirs' weights are fixed and drawn again from the seeds and Φ on resume, so a snapshot leaves them
     out (at 1000 units they were 4 MB an agent, 57 MB for a 10-agent test model); a snapshot written with them,
@@ -113,6 +130,7 @@ def test_a_snapshot_holds_no_reservoir_weights_and_an_older_one_with_them_still_
     snap = snapshots.read(path, ident)
     assert not [x.shape for x in snap.leaves if x.shape[-2:] in ((units, units), (units, trainer.agent.input_dim))]
     assert_same_results(trainer.run(population, snapshot=path), unbroken)
+    path.unlink()  # as a caller does once it has kept the Results: the run's last snapshot would resume at its end
 
     with pytest.raises(Stop):
         trainer.run(population, stop_after(4), snapshot=path, snapshot_every_s=0)
@@ -125,6 +143,7 @@ def test_a_snapshot_holds_no_reservoir_weights_and_an_older_one_with_them_still_
     lines = []
     assert_same_results(trainer.run(population, snapshot=path, log=lines.append), unbroken)
     assert lines == [f"resumed from {path} at iteration 3 of 6"]
+    path.unlink()
 
     # a snapshot records the versions and CPU it was computed under; a resume under others says so
     with pytest.raises(Stop):

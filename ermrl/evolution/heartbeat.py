@@ -5,8 +5,10 @@ On an RDB storage (PostgreSQL, SQLite, ...) opened with a ``heartbeat_interval``
 heartbeats are Optuna's own: ``RDBStorage.record_heartbeat`` and the stale trials it finds with the database's
 clock. Optuna's ``fail_stale_trials`` is not used because it cannot record why a trial failed (a finished trial
 takes no more attributes). Journal files and in-memory storages have no heartbeats in Optuna; there a heartbeat
-is the trial system attribute ``ermrl:heartbeat`` (Unix time). With ask/tell nothing beats by itself:
-``Heartbeat`` is a thread that beats for the worker's trials while it trains them.
+is the trial system attribute ``ermrl:heartbeat`` (Unix time), and since a journal only grows, a worker beats for
+one of its trials per interval (the oldest it trains), whose heartbeat stands for all trials naming the same worker.
+With ask/tell nothing beats by itself: ``Heartbeat`` is a thread that beats for the worker's trials while it trains
+them.
 
 A RUNNING trial of another worker is failed
 - at once when its worker ran on this machine and its process is gone (reason "interrupted");
@@ -119,8 +121,10 @@ class WorkerId:
         return w.get("host") == self.host and w.get("machine") == self.machine and "?" not in self.machine
 
     def lost_reason(self, t: FrozenTrial, stale_ids: set[int], grace_s: int, optuna_beats: bool,
-                    now: float) -> str | None:
-        """Why ``t`` (RUNNING, another worker's) is to be failed; None while its worker may be alive."""
+                    now: float, worker_beats: dict[str, float] | None = None) -> str | None:
+        """Why ``t`` (RUNNING, another worker's) is to be failed; None while its worker may be alive.
+        ``worker_beats`` ({worker token: last heartbeat}, ``worker_beats``) counts a heartbeat of any trial of
+        ``t``'s worker as ``t``'s own, where heartbeats are trial attributes."""
         w = t.user_attrs.get(WORKER_ATTR)
         lost = f"{LOST_PREFIX} (no heartbeat for {grace_s} s)"
         if isinstance(w, dict) and self.same_machine(w) and isinstance(w.get("pid"), int) \
@@ -130,7 +134,20 @@ class WorkerId:
         if optuna_beats and isinstance(w, dict) and beat is None:  # it beat before naming itself: Optuna knows
             return lost if t._trial_id in stale_ids else None
         last = float(beat) if isinstance(beat, (int, float)) else _timestamp(t.datetime_start)
+        shared = (worker_beats or {}).get(w.get("token")) if isinstance(w, dict) else None
+        if shared is not None:
+            last = shared if last is None else max(last, shared)
         return lost if last is not None and now - last > grace_s else None
+
+
+def worker_beats(trials: list[FrozenTrial]) -> dict[str, float]:
+    """{worker token: its latest heartbeat} over ``trials`` whose heartbeat is the attribute ``ermrl:heartbeat``."""
+    latest: dict[str, float] = {}
+    for t in trials:
+        w, beat = t.user_attrs.get(WORKER_ATTR), t.system_attrs.get(HEARTBEAT_ATTR)
+        if isinstance(w, dict) and isinstance(w.get("token"), str) and isinstance(beat, (int, float)):
+            latest[w["token"]] = max(latest.get(w["token"], beat), float(beat))
+    return latest
 
 
 def _timestamp(when: datetime.datetime | None) -> float | None:
@@ -165,9 +182,10 @@ def fail_lost(study: optuna.Study, trials: list[FrozenTrial], me: WorkerId, grac
         return 0
     optuna_beats = is_heartbeat_enabled(study._storage)
     stale = set(study._storage._get_stale_trial_ids(study._study_id)) if optuna_beats else set()
+    shared = None if optuna_beats else worker_beats(trials)
     failed, now = 0, time.time()
     for t in running:
-        reason = me.lost_reason(t, stale, grace_s, optuna_beats, now)
+        reason = me.lost_reason(t, stale, grace_s, optuna_beats, now, shared)
         if reason is not None and fail_trial(study, t._trial_id, reason):
             failed += 1
             log(f"trial {t.number} failed: {reason}; it will be redone")
@@ -176,7 +194,9 @@ def fail_lost(study: optuna.Study, trials: list[FrozenTrial], me: WorkerId, grac
 
 class Heartbeat:
     """Beats for a set of trials every ``interval_s`` seconds in a background thread, from ``start`` to
-    ``stop``. ``add`` beats at once for new trials (before anyone could find them without a heartbeat)."""
+    ``stop``: for each of them with Optuna's heartbeats (one row per trial, updated in place), for the oldest one
+    on a journal file (one line per interval, whatever the batch). ``add`` beats at once for a new trial (before
+    anyone could find it without a heartbeat)."""
 
     def __init__(self, study: optuna.Study, interval_s: float, log: Callable[[str], None] = lambda line: None):
         self.study, self.interval_s, self.log = study, interval_s, log
@@ -228,9 +248,11 @@ class Heartbeat:
 
     def _run(self) -> None:
         while not self._stop.wait(self.interval_s):
-            for trial_id in self.trial_ids:
+            for trial_id in sorted(self.trial_ids):
                 try:
                     self._beat(trial_id)
+                    if not self.optuna_beats:
+                        break  # this beat stands for all this worker's trials (WorkerId.lost_reason)
                 except UpdateFinishedTrialError:  # failed meanwhile by another worker; the tell will say so
                     self.remove(trial_id)
                 except Exception as e:  # a database hiccup must not kill training; the next beat retries

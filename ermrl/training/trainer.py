@@ -129,8 +129,8 @@ class Trainer:
             if progress_fn is not None:
                 progress_fn(Progress(it + 1, self.n_iterations, (it + 1) * steps_per_iter * n,
                                      self.n_iterations * steps_per_iter * n, elapsed, compile_s))
-            if saver is not None and it + 1 < self.n_iterations:
-                saver(lambda: snapshots.Snapshot(
+            if saver is not None:  # the last one too: a caller stopped before keeping the Results need not retrain
+                saver(final=it + 1 == self.n_iterations, make=lambda: snapshots.Snapshot(
                     it + 1, jax.device_get(kept_leaves(state)), self.env.snapshot() if self.host else None,
                     finished, metrics, finite, compile_s, before + time.perf_counter() - t1))
         return finished, metrics, finite, state, before + time.perf_counter() - t1
@@ -159,10 +159,10 @@ class Trainer:
         """Trains every agent of ``population`` for ``total_timesteps``; returns curves, fitness and every
         agent's final policy (``Results.policies``).
 
-        With ``snapshot`` (a file path), the run's state is written there every ``snapshot_every_s`` seconds,
-        and a run that finds a snapshot of the same config and population there continues from it, to the same
-        Results as an unbroken run (:mod:`ermrl.training.snapshots`). The caller removes the file once it has
-        kept the Results. ``log`` gets a line when a run resumes or cannot.
+        With ``snapshot`` (a file path), the run's state is written there every ``snapshot_every_s`` seconds
+        and after the last iteration, and a run that finds a snapshot of the same config and population there
+        continues from it (or, from the last one, trains no more), to the same Results as an unbroken run
+        (:mod:`ermrl.training.snapshots`). The caller removes the file once it has kept the Results. ``log`` gets a line when a run resumes or cannot.
 
         With ``config.processes`` > 1 on a host-loop backend and JAX on the CPU, the agents train in that many
         processes at once (:mod:`ermrl.training.processes`), to the same Results."""
@@ -221,14 +221,15 @@ class Trainer:
 
 
 class _Saver:
-    """Writes a snapshot when ``every_s`` seconds have passed since the last (or since the start)."""
+    """Writes a snapshot when ``every_s`` seconds have passed since the last (or since the start), and after the
+    final iteration."""
 
     def __init__(self, path: Path, ident: dict, every_s: float):
         self.path, self.ident, self.every_s = path, ident, every_s
         self.last = time.perf_counter()
 
-    def __call__(self, make: Callable[[], snapshots.Snapshot]) -> None:
-        if time.perf_counter() - self.last >= self.every_s:
+    def __call__(self, make: Callable[[], snapshots.Snapshot], final: bool = False) -> None:
+        if final or time.perf_counter() - self.last >= self.every_s:
             snapshots.write(self.path, self.ident, make())
             self.last = time.perf_counter()
 
