@@ -1,5 +1,6 @@
-"""The exception types the CLI turns into one-line messages: bad user input (exit code 2) and a run that cannot
-go on for a reason that is not a bug (exit code 1)."""
+"""The exception types the CLI turns into one-line messages: bad user input (exit code 2), a run that cannot
+go on for a reason that is not a bug (exit code 1), and a run that stopped before its time limit with work left
+(exit code 75)."""
 
 from __future__ import annotations
 
@@ -40,3 +41,15 @@ class RunFailed(RuntimeError):
 
     The message is one line that says what happened and where to look; what was done before is kept.
     """
+
+
+OUT_OF_TIME = 75
+"""The exit status of a command that stopped cleanly before its ``--stop-after`` time ran out, with work left
+(``EX_TEMPFAIL`` of sysexits.h: rerun it to continue)."""
+
+
+class OutOfTime(Exception):
+    """A run that stopped cleanly, between two generations, because the next one would not end before its time
+    limit (``--stop-after``): nothing half-trained is left, and rerunning the same command continues it. The
+    message is one line that says where it stopped and how to go on; the CLI prints it and exits with
+    :data:`OUT_OF_TIME`."""

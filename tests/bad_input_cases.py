@@ -481,4 +481,14 @@ CASES = [
                                      "learning rate); see `ermrl test --help`"),
     ("experiment run partial-observability --test-lrs 1e-4", "ermrl experiment: error: --test-lrs is now "
      "--test-learning-rates (ER-MRL's learning rates in every test phase); see `ermrl experiment run --help`"),
+    # -- --stop-after: a duration with units ------------------------------------------------------------------
+    ("evolve --stop-after 90", "ermrl evolve: error: argument --stop-after: must be a duration with units such as "
+                               "2h30m, 90m or 45s, got '90'; see `ermrl evolve --help`"),
+    ("evolve --stop-after 0s", "ermrl evolve: error: argument --stop-after: must be longer than 0 s and at most a year "
+                               "(8784h), got '0s'; see `ermrl evolve --help`"),
+    ("experiment run locomotion --stop-after 30m2h", "ermrl experiment: error: argument --stop-after: must be a "
+     "duration with units such as 2h30m, 90m or 45s, got '30m2h'; see `ermrl experiment run --help`"),
+    ("reproduce h2_converged --stop-after 9999h", "ermrl reproduce: error: argument --stop-after: must be longer than "
+                                                  "0 s and at most a year (8784h), got '9999h'; see `ermrl reproduce "
+                                                  "--help`"),
 ]

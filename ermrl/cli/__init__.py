@@ -14,7 +14,7 @@ from typing import NoReturn
 
 import ermrl
 from ermrl import compile_cache, devices
-from ermrl.errors import TERMINATED, ConfigError, RunFailed, raise_terminated
+from ermrl.errors import OUT_OF_TIME, TERMINATED, ConfigError, OutOfTime, RunFailed, raise_terminated
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -230,6 +230,9 @@ def _run(argv: list[str] | None) -> int:
             traceback.print_exc()
         print(f"{command}: error: {_shown(e, parser, argv)}", file=sys.stderr)
         return 2 if isinstance(e, ConfigError) else 1
+    except OutOfTime as e:
+        print(f"{command}: {e}", flush=True)
+        return OUT_OF_TIME
     except KeyboardInterrupt:
         _leave(130, "interrupted")
     except SystemExit as e:

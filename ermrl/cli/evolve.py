@@ -24,7 +24,7 @@ def add_parser(sub, formatter) -> None:
                                 help="env id; repeat for a fitness over several envs (default CartPoleNoVel-v1)"),
                  "envs", EvolveConfig)
     p.add_argument("--seeds", type=int, default=3, help="seeds per trial; its fitness is their mean")
-    options.add_options(p, "env", "agent", "ppo", "search", "workers", "convergence")
+    options.add_options(p, "env", "agent", "ppo", "search", "workers", "stop", "convergence")
     p.add_argument("--baselines", type=options.path, default=None, metavar="TABLE",
                    help="baselines table (default runs/baselines.json over the shipped one); several envs only")
     options.sets(p.add_argument("--allow-weak-baselines", action="store_true",
@@ -38,6 +38,7 @@ def add_parser(sub, formatter) -> None:
 
 def cmd_evolve(args) -> int:
     import dataclasses
+    import time
 
     import optuna
 
@@ -53,6 +54,7 @@ def cmd_evolve(args) -> int:
     from ermrl.experiments import baseline_runs
     from ermrl.training import memory
 
+    stop_at = None if args.stop_after is None else time.time() + args.stop_after  # from the command's start
     if args.sampler not in SAMPLERS:
         raise ConfigError(f"unknown sampler {args.sampler!r}; choose one of {', '.join(SAMPLERS)}")
     env_ids = tuple(args.env or ["CartPoleNoVel-v1"])
@@ -64,7 +66,7 @@ def cmd_evolve(args) -> int:
                           sampler_seed=args.sampler_seed, envs=env_ids if len(env_ids) > 1 else (),
                           normalization=args.normalization, seed_schedule=args.seed_schedule)
     worker = WorkerConfig(args.batch, args.worker_index, args.heartbeat_interval, args.grace_period,
-                          options.convergence_rule(args), args.snapshots)
+                          options.convergence_rule(args), args.snapshots, stop_at=stop_at)
     if args.snapshots is not None:
         storage.check_folder(args.snapshots, "--snapshots")
     agents = min(worker.batch or config.generation_size, config.trials) * config.seeds  # trained at once, per env

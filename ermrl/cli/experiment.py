@@ -46,7 +46,7 @@ def add_parser(sub, formatter) -> None:
                                 ("--test-agents-per-run", "agents_per_run", {"type": int, "metavar": "N"})):
         options.Option(flag, TestBudget, field, kwargs=kwargs).add_to(run)
     options.refuse_renamed(run, "--test-lrs", "--test-learning-rates", "ER-MRL's learning rates in every test phase")
-    options.add_options(run, "env", skip=("--timesteps",))
+    options.add_options(run, "env", "stop", skip=("--timesteps",))
     options.add_config_option(run)
     run.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -82,6 +82,8 @@ def _study_label(spec) -> str:
 
 
 def _run(args) -> int:
+    import time
+
     import optuna
 
     from ermrl import envs, storage
@@ -89,6 +91,7 @@ def _run(args) -> int:
     from ermrl.evolution.study import check_writable, make_storage, shown_url
     from ermrl.experiments import registry, runner
 
+    stop_at = None if args.stop_after is None else time.time() + args.stop_after  # from the command's start
     experiment, scale = registry.get(args.name), registry.get_scale(args.scale)
     budget = runner.TestBudget(args.test_seeds, args.test_timesteps,
                                None if args.test_learning_rates is None else tuple(args.test_learning_rates),
@@ -142,7 +145,7 @@ def _run(args) -> int:
     try:
         report = runner.run_experiment(experiment, scale, folder, url, args.backend, args.env_workers, tuple(args.only),
                                        print, progress, args.baselines, budget, args.baseline_store,
-                                       args.env_threads, args.processes)
+                                       args.env_threads, args.processes, stop_at)
     finally:
         close()
     print(f"report: {report.resolve()}")

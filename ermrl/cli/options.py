@@ -143,6 +143,25 @@ def storage(value: str) -> str:
     return value
 
 
+MAX_STOP_AFTER_S = 366 * 86_400
+"""The longest --stop-after, in seconds (a year)."""
+
+
+def duration(value: str) -> float:
+    """argparse type of --stop-after: a duration with units, hours, minutes and seconds in that order (``2h30m``,
+    ``90m``, ``45s``, ``1.5h``), in seconds."""
+    import re
+
+    match = re.fullmatch(r"(?:(\d+(?:\.\d*)?)h)?(?:(\d+(?:\.\d*)?)m)?(?:(\d+(?:\.\d*)?)s)?", value.strip())
+    if not value.strip() or match is None:
+        raise argparse.ArgumentTypeError(f"must be a duration with units such as 2h30m, 90m or 45s, got {value!r}")
+    h, m, sec = (float(g or 0) for g in match.groups())
+    seconds = 3600 * h + 60 * m + sec
+    if not 0 < seconds <= MAX_STOP_AFTER_S:
+        raise argparse.ArgumentTypeError(f"must be longer than 0 s and at most a year (8784h), got {value!r}")
+    return seconds
+
+
 def _auto_or_count(value: str, low: int, high: int | None = None):
     """``value`` as 'auto' or an integer in [low, high] (no upper bound when ``high`` is None); else the
     ArgumentTypeError that names the range."""
@@ -251,6 +270,11 @@ def _groups() -> dict[str, list[Option]]:
                     Option("--heartbeat-interval", WorkerConfig, "heartbeat_interval", kwargs={"type": int}),
                     Option("--grace-period", WorkerConfig, "grace_period", kwargs={"type": int}),
                     Option("--snapshots", WorkerConfig, "snapshots", kwargs={"type": path, "metavar": "DIR"})],
+        "stop": [Option("--stop-after", help="stop cleanly between two generations once the next one would not end "
+                        "within DURATION of the command's start (2h30m, 90m, 45s), judged by the time the last one "
+                        "took, and exit with status 75; rerun the same command to continue. For a job with a time "
+                        "limit (a batch scheduler's walltime) or a machine lent for some hours. Default: no limit.",
+                        kwargs={"type": duration, "metavar": "DURATION"}, gives="stop_at")],
         "convergence": [
             Option("--until-converged", help="also stop once CMA-ES has converged: every searched parameter's spread "
                    "(the search distribution's standard deviation, in decades) below --converged-width for "

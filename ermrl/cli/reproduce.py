@@ -25,6 +25,7 @@ def add_parser(sub, formatter) -> None:
     p.add_argument("--root", type=options.path, default=None, metavar="DIR",
                    help="the repository's root, where docs/data/ is (default: the checkout of this ermrl, else the "
                         "current folder)")
+    options.add_options(p, "stop")
     options.add_config_option(p)
 
 
@@ -42,8 +43,11 @@ def _root(given: Path | None) -> Path:
 
 
 def cmd_reproduce(args) -> int:
+    import time
+
     from ermrl.experiments.reproduction import catalog, execute
 
+    stop_at = None if args.stop_after is None else time.time() + args.stop_after  # from the command's start
     steps = catalog.select(args.names)
     if args.list:
         width = max(len(s.name) for s in steps)
@@ -56,5 +60,5 @@ def cmd_reproduce(args) -> int:
         return 0
     root = _root(args.root)
     for s in steps:
-        execute.run_step(s, root)
+        execute.run_step(s, root, stop_at=stop_at)
     return 0

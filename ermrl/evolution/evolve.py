@@ -11,7 +11,9 @@ machine lost) are failed once found so (its process gone from this machine: "int
 stale: "worker lost ..."; see :mod:`ermrl.evolution.heartbeat`) and their slots are trained again, with their
 Φ asked again (:meth:`ermrl.evolution.workers.Worker.claim`). A worker stopped by Ctrl-C or SIGTERM fails its own
 trials on the way out ("interrupted"). With ``WorkerConfig.snapshots``, the batch's training is snapshotted
-every few minutes (:func:`batch_snapshot`), and the rerun that asks the same trials again continues it.
+every few minutes (:func:`batch_snapshot`), and the rerun that asks the same trials again continues it. With
+``WorkerConfig.stop_at``, a worker stops between two batches (:class:`~ermrl.errors.OutOfTime`) once the next one
+would not end in time.
 """
 
 from __future__ import annotations
@@ -29,9 +31,10 @@ import optuna
 from optuna.exceptions import UpdateFinishedTrialError
 from optuna.trial import TrialState
 
-from ermrl.errors import RunFailed
+from ermrl.errors import OutOfTime, RunFailed
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.scoring import score
+from ermrl.evolution.heartbeat import INTERRUPTED
 from ermrl.evolution.workers import Worker, WorkerConfig
 from ermrl.training import Population, Progress, Results, Trainer
 
@@ -213,12 +216,17 @@ def evolve_together(members: list[Member], trainers: dict[str, Trainer] | None =
         active = list(range(len(members)))
         while True:
             claims = []
-            for i in list(active):
-                claim = workers[i].claim()
-                if claim is None:
-                    active.remove(i)
-                else:
-                    claims.append((i, claim))
+            try:
+                for i in list(active):
+                    claim = workers[i].claim()
+                    if claim is None:
+                        active.remove(i)
+                    else:
+                        claims.append((i, claim))
+            except OutOfTime:  # another study's batch would not end in time: the round's claims are given back
+                for i, _ in claims:
+                    workers[i].release(INTERRUPTED)  # their Φ are asked again by the rerun
+                raise
             if not claims:
                 for m in members:  # snapshots of batches whose trials were never asked again
                     if m.worker.snapshots is not None and (old := m.worker.snapshots / m.study.study_name).is_dir():

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import signal
 import sys
 import threading
@@ -25,7 +26,7 @@ from optuna.exceptions import UpdateFinishedTrialError
 from optuna.trial import FrozenTrial, TrialState
 
 from ermrl.agent import Phi
-from ermrl.errors import TERMINATED, ConfigError, raise_terminated
+from ermrl.errors import TERMINATED, ConfigError, OutOfTime, raise_terminated
 from ermrl.evolution import convergence
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.convergence import Convergence
@@ -98,6 +99,10 @@ class WorkerConfig:
     stopped batch trains again from its start."""
     snapshot_every_s: float = 300.0
     """Seconds between two snapshots of a batch in training (with ``snapshots``)."""
+    stop_at: float | None = None
+    """A time (``time.time()``, seconds) by which this worker stops: it claims no batch that would end after it,
+    by the last batch's time (this worker's, else the study's last generation's), and raises
+    :class:`~ermrl.errors.OutOfTime` instead (``--stop-after``); None: no limit."""
 
     def __post_init__(self):
         if self.batch is not None and self.batch < 1:
@@ -113,12 +118,37 @@ class WorkerConfig:
         if max(self.heartbeat_interval, self.grace_period) > MAX_WAIT_S:
             raise ConfigError(f"`heartbeat_interval` and `grace_period` must be <= {MAX_WAIT_S} seconds (a day), "
                               f"got {self.heartbeat_interval} and {self.grace_period}", owner=type(self))
+        if self.stop_at is not None and not math.isfinite(self.stop_at):
+            raise ConfigError(f"`stop_at` must be a finite time, got {self.stop_at}", owner=type(self))
         if not self.snapshot_every_s > 0:
             raise ConfigError(f"`snapshot_every_s` must be > 0 (seconds), got {self.snapshot_every_s}", owner=type(self))
         if self.grace_period <= self.heartbeat_interval:
             raise ConfigError(f"`grace_period` ({self.grace_period} s) must be longer than `heartbeat_interval` "
                               f"({self.heartbeat_interval} s), or live trials would be failed as lost",
                               owner=type(self))
+
+
+def generation_seconds(trials: list[FrozenTrial], size: int) -> float | None:
+    """The wall time of the study's last generation whose ``size`` trials all completed: from its first trial's
+    start to its last one's end (with several workers, about one batch's time); None when there is none."""
+    by: dict[int, list[FrozenTrial]] = {}
+    for t in trials:
+        if t.state == TrialState.COMPLETE and isinstance(t.user_attrs.get(ATTR), int) \
+                and t.datetime_start is not None and t.datetime_complete is not None:
+            by.setdefault(t.user_attrs[ATTR], []).append(t)
+    full = [g for g, ts in by.items() if len(ts) >= size]
+    if not full:
+        return None
+    last = by[max(full)]
+    return (max(t.datetime_complete for t in last) - min(t.datetime_start for t in last)).total_seconds()
+
+
+def _minutes(seconds: float) -> str:
+    """'41 min', '2 h 05 min', '40 s'."""
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    m = round(seconds / 60)
+    return f"{m} min" if m < 60 else f"{m // 60} h {m % 60:02d} min"
 
 
 def worker_seed(seed: int | None, index: int) -> int | None:
@@ -165,6 +195,9 @@ class Worker:
         self._warned_index = False
         self._spread_logged: int | None = None
         self.terminated = self._deferring = False
+        self.last_batch_s: float | None = None
+        """Seconds from claiming this worker's last told batch to telling it (its training, mostly)."""
+        self._claimed_at: float | None = None
 
     def __enter__(self) -> "Worker":
         self._sigterm = None
@@ -220,12 +253,18 @@ class Worker:
             self.heartbeat.remove(trial_id)
 
     def finished(self, trials: list[optuna.Trial]) -> None:
-        """Stops the heartbeats of told trials."""
+        """Stops the heartbeats of told trials, and times the batch (``last_batch_s``)."""
         for t in trials:
             self.heartbeat.remove(t._trial_id)
+        if self._claimed_at is not None:
+            self.last_batch_s = time.monotonic() - self._claimed_at
+            self._claimed_at = None
 
     def claim(self) -> Claim | None:
-        """The next trials to train, or None once the study holds ``config.trials`` completed trials."""
+        """The next trials to train, or None once the study holds ``config.trials`` completed trials. With
+        ``WorkerConfig.stop_at``, :class:`~ermrl.errors.OutOfTime` instead of trials that would not be trained by
+        then, judged by the time this worker's last batch took (``last_batch_s``), else the study's last
+        generation's (:func:`generation_seconds`); with neither (a new study), while any time is left."""
         waiting = None
         while True:
             self.check_terminated()
@@ -238,9 +277,11 @@ class Worker:
             slots = self.ledger.next_slots(trials)
             n = min(self.batch, need, slots.free if self.ledger.cma else self.batch)
             if n > 0:
+                self._check_time(trials, slots.generation, completed)
                 self._redo(trials, slots.generation, n)
                 claim = self._ask(n, completed)
                 if claim is not None:
+                    self._claimed_at = time.monotonic()
                     return claim
                 continue
             reason = (f"generation {slots.generation} is full ({slots.running} of its trials are running in other "
@@ -249,6 +290,21 @@ class Worker:
                 self.log(f"waiting: {reason}")
                 waiting = reason
             time.sleep(POLL_S)
+
+    def _check_time(self, trials: list[FrozenTrial], generation: int, completed: int) -> None:
+        """Raises OutOfTime when the batch about to be claimed would end after ``WorkerConfig.stop_at``."""
+        stop_at = self.worker.stop_at
+        if stop_at is None:
+            return
+        expected_s = self.last_batch_s if self.last_batch_s is not None else \
+            generation_seconds(trials, self.config.generation_size)
+        left = stop_at - time.time()
+        if left > (expected_s or 0.0):
+            return
+        why = "the time limit has passed" if left <= 0 or not expected_s else \
+            f"it would take about {_minutes(expected_s)} (as the last one did) and the time limit leaves {_minutes(left)}"
+        raise OutOfTime(f"stopped before generation {generation} of study {self.study.study_name!r} ({completed} of "
+                        f"{self.config.trials} trials done): {why}; rerun the same command to continue")
 
     def _redo(self, trials: list[FrozenTrial], generation: int, n: int) -> None:
         """Enqueues, for the next asks, the Φ of at most ``n`` trials of ``generation`` that a stopped or lost

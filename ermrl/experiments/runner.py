@@ -13,7 +13,7 @@ from typing import Callable
 
 from ermrl import envs, storage
 from ermrl.agent import AgentConfig
-from ermrl.errors import ConfigError
+from ermrl.errors import ConfigError, OutOfTime
 from ermrl.evolution import record as study_record
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.convergence import Convergence
@@ -250,16 +250,26 @@ def estimate_seconds(plans: list[StudyPlan], done: dict[str, int] | None = None,
     return total + COMPILE_S * busy
 
 
+def _check_time(stop_at: float | None, what: str) -> None:
+    """OutOfTime when ``stop_at`` has passed, before ``what`` starts."""
+    if stop_at is not None and time.time() >= stop_at:
+        raise OutOfTime(f"stopped before {what}: the time limit has passed; rerun the same command to continue")
+
+
 def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_url: str | None = None,
                    backend: str = "auto", env_workers: int | str = "auto", only: tuple[str, ...] = (),
                    log: Callable[[str], None] = print, progress: Callable | None = None,
                    baselines_table: Path | None = None, budget: TestBudget = TestBudget(),
-                   baseline_store: Path | None = None, env_threads: int | str = "auto", processes: int = 1) -> Path:
+                   baseline_store: Path | None = None, env_threads: int | str = "auto", processes: int = 1,
+                   stop_at: float | None = None) -> Path:
     """Runs (or resumes) every study of ``experiment`` (or those named in ``only``); returns the report's path.
     Studies over several envs take their constants from ``baselines_table`` (default runs/baselines.json over
     the shipped table), computing the missing ones first. ``budget`` overrides the test phases' budgets; a test
     phase stopped midway keeps its finished models for the rerun (:mod:`ermrl.experiments.checkpoints`), and with
-    ``baseline_store`` the PPO baselines are shared with other test phases (:mod:`ermrl.experiments.baseline_models`)."""
+    ``baseline_store`` the PPO baselines are shared with other test phases (:mod:`ermrl.experiments.baseline_models`).
+    With ``stop_at`` (a ``time.time()``), :class:`~ermrl.errors.OutOfTime` once an evolution's next generation
+    would not end by then (``WorkerConfig.stop_at``), or when a selection or test phase would start after it; one
+    already started runs to its end."""
     import optuna
 
     from ermrl.analysis.experiment_report import write_experiment_report
@@ -305,7 +315,8 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
             # no bar for a finished evolution: entering one prints "compiling" where nothing trains
             bar = progress(f"evolve {'+'.join(q.spec.name for q in group)}") if progress else None
             evolve_together([Member(prepare(q)[1], prepare(q)[0], WorkerConfig(until_converged=q.until_converged,
-                                                                                snapshots=folder / EVOLUTION_SNAPSHOTS))
+                                                                                snapshots=folder / EVOLUTION_SNAPSHOTS,
+                                                                                stop_at=stop_at))
                              for q in group], make_trainers(*(prepare(q)[0] for q in group)),
                             (lambda g: bar(g.train) if g.train else None) if bar else None,
                             lambda line: log(f"    {line}"))
@@ -316,6 +327,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
             log(f"    converged at generation {stopped['generation']} ({stopped['trials']} trials)")
         sel = load_selection(study)
         if selection_left(p, study):
+            _check_time(stop_at, f"the selection of study {p.study!r}")
             sel = select(study, config, p.select_top, p.select_seeds, progress)
         log(f"    Φ* = trial {sel.winner} (selected among the top {len(sel.trials)} on {len(sel.seeds)} fresh seeds)")
         for t in p.tests:
@@ -325,6 +337,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
                 checkpoints.discard(out)  # left by a stop between writing the test phase and removing it
                 log(f"{where}: done before, kept ({out})")
                 continue
+            _check_time(stop_at, f"the test phase of study {p.study!r} on {t.env_id or config.env_ids[0]}")
             rates = t.learning_rates or (config.train.ppo.learning_rate,)
             log(f"{where}: {t.seeds} seeds × {t.timesteps:,} steps, ER-MRL at learning rate"
                 f"{'s' if len(rates) > 1 else ''} {', '.join(f'{rate:g}' for rate in rates)}")

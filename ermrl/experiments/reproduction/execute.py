@@ -5,7 +5,10 @@ Each command is its own process: ``ermrl`` is this interpreter's (``python -m er
 ``$ERMRL``), a ``python`` script runs on this interpreter, a ``reference`` one on ``$REF_PYTHON`` (default
 ``.venv-ref/bin/python``); all of them with the root first on PYTHONPATH, so that they import this checkout's
 ``ermrl``. A command that fails ends the step and the run (RunFailed, exit 1): rerun it to resume, since every
-command resumes where it stopped. An experiment's files are stashed even then.
+command resumes where it stopped. An experiment's files are stashed even then. With a time limit (``stop_at``,
+``ermrl reproduce --stop-after``), every ``ermrl evolve`` and ``ermrl experiment run`` gets ``--stop-after`` with
+the time left, no command starts once it has passed, and a command that stopped for it (exit status 75) ends the
+run with :class:`~ermrl.errors.OutOfTime`.
 """
 
 from __future__ import annotations
@@ -17,10 +20,11 @@ import shlex
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Callable
 
-from ermrl.errors import RunFailed
+from ermrl.errors import OUT_OF_TIME, OutOfTime, RunFailed
 from ermrl.experiments.reproduction import folders
 from ermrl.experiments.reproduction.actions import (
     Action, Collect, CopyFiles, Experiment, MakeDirs, Remove, Run, Step, StopIf, shell_guard,
@@ -92,12 +96,13 @@ def dry_run(step: Step, write: Callable[[str], None] = print) -> None:
             write(line)
 
 
-def run_step(step: Step, root: Path, write: Callable[[str], None] = print) -> None:
-    """Runs ``step``'s actions in order in ``root``; RunFailed when a command fails."""
+def run_step(step: Step, root: Path, write: Callable[[str], None] = print, stop_at: float | None = None) -> None:
+    """Runs ``step``'s actions in order in ``root``; RunFailed when a command fails, OutOfTime when the time limit
+    ``stop_at`` (a ``time.time()``) stopped it."""
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%H:%M:%S")
     write(f"== {step.name} ({now} UTC)")
     for action in step.actions:
-        if _act(step, action, root, write) is _STOP:
+        if _act(step, action, root, write, stop_at) is _STOP:
             return
 
 
@@ -108,10 +113,10 @@ def _skipped(conditions, root: Path) -> bool:
     return bool(conditions) and all(c.holds(root) for c in conditions)
 
 
-def _act(step: Step, action: Action, root: Path, write: Callable[[str], None]):
+def _act(step: Step, action: Action, root: Path, write: Callable[[str], None], stop_at: float | None = None):
     if isinstance(action, Run):
         if not _skipped(action.skip_if, root):
-            _run(step, action, root)
+            _run(step, action, root, stop_at)
     elif isinstance(action, Experiment):
         for other in folders.journals_elsewhere(root, action.name, action.scale):
             print(f"warning: {other.relative_to(root)} holds studies of {action.name} at {action.scale}, but this step "
@@ -119,7 +124,7 @@ def _act(step: Step, action: Action, root: Path, write: Callable[[str], None]):
                   file=sys.stderr)
         folders.restore(root, action.folder)
         try:  # also when the run is stopped (Ctrl-C, a failure)
-            _run(step, action.command(), root)
+            _run(step, action.command(), root, stop_at)
             folders.collect(root, action.folder)
         finally:
             folders.stash(root, action.folder)
@@ -146,10 +151,22 @@ def _act(step: Step, action: Action, root: Path, write: Callable[[str], None]):
     return None
 
 
-def _run(step: Step, run: Run, root: Path) -> None:
+TIMED = (("evolve",), ("experiment", "run"))
+"""The ``ermrl`` commands that take ``--stop-after``."""
+
+
+def _run(step: Step, run: Run, root: Path, stop_at: float | None = None) -> None:
     """Runs one command in ``root``, its values resolved now; its output shown (and kept for ``tee``); RunFailed
-    when it fails. Ctrl-C reaches the command too, which stops on its own; any other stop (SIGTERM) stops it."""
+    when it fails. Ctrl-C reaches the command too, which stops on its own; any other stop (SIGTERM) stops it.
+    With ``stop_at``: OutOfTime instead of starting once it has passed, or when the command stopped for it."""
     argv = _program(run) + [w for a in run.args for w in ([a] if isinstance(a, str) else a.resolve(root))]
+    if stop_at is not None:
+        left = stop_at - time.time()
+        if left < 1:
+            raise OutOfTime(f"stopped before step {step.name}'s `{command_line(run)}`: the time limit has passed; "
+                            "rerun the same command to continue")
+        if run.program == "ermrl" and any(tuple(run.args[:len(words)]) == words for words in TIMED):
+            argv += ["--stop-after", f"{int(left)}s"]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")])),
            "PYTHONIOENCODING": "utf-8"}
     captured = run.tee is not None or not run.show
@@ -172,6 +189,9 @@ def _run(step: Step, run: Run, root: Path) -> None:
         proc.terminate()
         proc.wait()
         raise
+    if code == OUT_OF_TIME and stop_at is not None:
+        raise OutOfTime(f"step {step.name}: `{command_line(run)}` stopped before the time limit with work left; "
+                        "rerun the same command to continue")
     if code != 0:
         raise RunFailed(f"step {step.name}: `{command_line(run)}` exited with status {code}; rerun `ermrl reproduce "
                         f"{step.name}` to resume it")
