@@ -2,6 +2,7 @@
 tests on an unseen env, the named experiments at smoke scale, and statistics in the test summaries."""
 
 import json
+import re
 from pathlib import Path
 
 import jax
@@ -370,6 +371,39 @@ def test_the_converged_scale_estimates_the_trial_limit_and_the_typical_convergen
     assert len(lines("converged", "ant-1res", 0)[0]) == 2  # one reservoir: no caveat
     paper, _ = lines("paper", "ant-2res", 27)  # a scale without convergence: the one line, no trial-limit clause
     assert len(paper) == 1 and paper[0].endswith("already done)")
+
+
+def test_a_running_study_is_estimated_at_the_pace_of_its_last_generation(tmp_path):
+    """Before it resumes a study, `experiment run` prints the rest of its evolution at its last generation's pace,
+    and at a scale that stops at convergence, where the trend of CMA-ES's spread puts the stop."""
+    import dataclasses
+
+    from ermrl.cli.experiment import pace_line
+    from ermrl.evolution.evolve import evolve
+    from ermrl.evolution.study import make_sampler, open_study
+    from ermrl.evolution.workers import generation_seconds
+
+    (plan,) = [p for p in runner.plan(registry.get("partial-observability"), registry.get_scale("converged"),
+                                      tmp_path) if p.spec.name == "cartpole-1res"]
+    small = dataclasses.replace(plan.config, train=dataclasses.replace(plan.config.train, total_timesteps=2048),
+                                seeds=1, popsize=2, trials=20)
+    plan = dataclasses.replace(plan, config=small)
+    study = open_study(f"journal:{tmp_path / 'studies.log'}", plan.study, make_sampler("cmaes", 2, 0),
+                       encode_study_record(small))
+    assert pace_line(plan, study) is None  # nothing to go by yet
+    evolve(study, dataclasses.replace(small, trials=14))  # 7 generations
+    took = generation_seconds(study.get_trials(deepcopy=False), 2)
+    line = pace_line(plan, study)
+    assert re.fullmatch(rf"  {plan.study}: \d+ s a generation \(its last one\): 3 more to its trial limit, about "
+                        r"\d+ (s|min); (its spread is not shrinking \(`ermrl convergence`\), so it will likely run to "
+                        r"that limit|the trend of its spread \(`ermrl convergence`\) puts the stop near generation "
+                        r"\d+, (beyond that limit|\d+ more, about \d+ (s|min)))", line), line
+    assert line.split(": ", 1)[1].startswith(f"{took:.0f} s a generation")
+    plain = dataclasses.replace(plan, until_converged=None)  # a scale without convergence: the pace only
+    assert pace_line(plain, study) == f"  {plan.study}: {took:.0f} s a generation (its last one): 3 more to its " \
+                                      f"trial limit, about {3 * took:.0f} s"
+    done = dataclasses.replace(plan, config=dataclasses.replace(small, trials=14))
+    assert pace_line(done, study) is None  # evolved to its limit
 
 
 def test_runtime_settings_reach_every_study_and_a_study_resumes_under_other_ones(tmp_path):

@@ -122,7 +122,7 @@ def _run(args) -> int:
     url = args.storage or runner.default_storage(folder)
     check_writable(url)
     make_storage(url)
-    done, left, unselected = {}, {}, {p.study for p in plans}
+    done, left, unselected, paces = {}, {}, {p.study for p in plans}, []
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     for p in plans:
         try:
@@ -131,13 +131,14 @@ def _run(args) -> int:
             left[p.study] = runner.tests_left(p, study)
             if not runner.selection_left(p, study):
                 unselected.discard(p.study)
+            paces += [line] if (line := pace_line(p, study)) else []
         except KeyError:
             pass
     print(f"experiment {experiment.name} at {scale.name} scale: {_count(len(plans), 'study', 'studies')} in {folder} "
           f"(storage {shown_url(url)})")
     if not args.no_estimate:
         lines, seconds = estimate_lines(plans, scale, done, left, unselected, args.baseline_store, budget, table)
-        print("\n".join(lines))
+        print("\n".join(lines + paces))
         if seconds >= 60 and (note := busy_note()):
             print(note)
 
@@ -165,7 +166,7 @@ def estimate_lines(plans: list, scale: Scale, done: dict[str, int], left: dict[s
     lines = [f"estimated time: {seconds / 60:.0f} min (rough: nominal throughput, "
              f"{_count(sum(done.values()), 'trial')} and {_count(finished, 'test phase')} already done)"
              + (" if every study runs to its trial limit" if scale.until_converged else "")]
-    if scale.until_converged:
+    if scale.until_converged and any(done.get(p.study, 0) < registry.CONVERGED_TRIALS for p in plans):
         typical = [dataclasses.replace(p, config=dataclasses.replace(
             p.config, trials=min(p.config.trials, registry.CONVERGED_TRIALS))) for p in plans]
         seconds = runner.estimate_seconds(typical, done, left, baseline_store, budget.agents_per_run, unselected,
@@ -176,3 +177,40 @@ def estimate_lines(plans: list, scale: Scale, done: dict[str, int], left: dict[s
             lines.append("  (a study of 2 or more reservoirs searches 6 or more parameters and may not converge "
                          "before its trial limit; `ermrl convergence` projects a running study)")
     return lines, seconds
+
+
+def pace_line(p, study) -> str | None:
+    """For a study still evolving with a generation completed, its remaining evolution at the pace of its last
+    generation (as recorded in the study, on whatever machine ran it), and, at a scale that stops at convergence,
+    where the trend of CMA-ES's spread (`ermrl convergence`) puts the stop; None for any other study."""
+    import math
+
+    from optuna.trial import TrialState
+
+    from ermrl.evolution import convergence
+    from ermrl.evolution.workers import duration_text, generation_seconds
+
+    trials = study.get_trials(deepcopy=False)
+    size, limit = p.config.generation_size, p.config.trials
+    done = sum(t.state == TrialState.COMPLETE for t in trials)
+    took = generation_seconds(trials, size)
+    if took is None or done >= limit:
+        return None
+    left = math.ceil((limit - done) / size)
+    line = (f"  {p.study}: {duration_text(took)} a generation (its last one): {left} more to its trial limit, "
+            f"about {duration_text(left * took)}")
+    if p.until_converged is None or p.config.sampler != "cmaes":
+        return line
+    verdict = convergence.judge(study, p.config.space, size, p.until_converged, trials)
+    projection = None if verdict.generation is not None else convergence.project(verdict.spread, p.until_converged)
+    if projection is None:
+        return line
+    if projection.generation is None:
+        return line + "; its spread is not shrinking (`ermrl convergence`), so it will likely run to that limit"
+    stop = math.ceil(projection.generation)  # the last generation it trains
+    if (stop + 1) * size >= limit:
+        return line + (f"; the trend of its spread (`ermrl convergence`) puts the stop near generation {stop:,}, "
+                       "beyond that limit")
+    more = max(stop + 1 - done // size, 0)
+    return line + (f"; the trend of its spread (`ermrl convergence`) puts the stop near generation {stop:,}, "
+                   f"{more} more, about {duration_text(more * took)}")

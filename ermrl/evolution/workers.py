@@ -143,11 +143,13 @@ def generation_seconds(trials: list[FrozenTrial], size: int) -> float | None:
     return (max(t.datetime_complete for t in last) - min(t.datetime_start for t in last)).total_seconds()
 
 
-def _minutes(seconds: float) -> str:
-    """'41 min', '2 h 05 min', '40 s'."""
+def duration_text(seconds: float) -> str:
+    """A duration as the messages show it: '40 s', '41 min', '2 h 05 min', '19 h'."""
     if seconds < 60:
         return f"{seconds:.0f} s"
     m = round(seconds / 60)
+    if m >= 600:
+        return f"{round(seconds / 3600)} h"
     return f"{m} min" if m < 60 else f"{m // 60} h {m % 60:02d} min"
 
 
@@ -301,8 +303,9 @@ class Worker:
         left = stop_at - time.time()
         if left > (expected_s or 0.0):
             return
-        why = "the time limit has passed" if left <= 0 or not expected_s else \
-            f"it would take about {_minutes(expected_s)} (as the last one did) and the time limit leaves {_minutes(left)}"
+        why = "the time limit has passed" if left <= 0 or not expected_s else (
+            f"it would take about {duration_text(expected_s)} (as the last one did) and the time limit leaves "
+            f"{duration_text(left)}")
         raise OutOfTime(f"stopped before generation {generation} of study {self.study.study_name!r} ({completed} of "
                         f"{self.config.trials} trials done): {why}; rerun the same command to continue")
 
