@@ -233,13 +233,12 @@ def test_evolve_until_converged_stops_records_why_and_a_rerun_does_nothing(tmp_p
 
 
 def test_evolve_until_converged_logs_each_generations_spread_and_the_projected_stop(tmp_path):
-    """Not converged after 8 generations: one line per generation sampled from a stored distribution, logged as the
-    next one is claimed (2 to 6),
-    the projection from the fifth on."""
+    """Not converged after 8 generations: one line per generation sampled from a stored distribution, logged as
+    that generation starts (2 to 7), the projection from the fifth on."""
     run = _evolve(tmp_path, "--until-converged", "--trials", "16")
     assert run.returncode == 0, run.stderr
     lines = [line for line in run.stdout.splitlines() if re.match(r"generation \d+: widest spread", line)]
-    assert [int(line.split()[1].rstrip(":")) for line in lines] == [2, 3, 4, 5, 6], run.stdout
+    assert [int(line.split()[1].rstrip(":")) for line in lines] == [2, 3, 4, 5, 6, 7], run.stdout
     assert all(re.fullmatch(r"generation \d: widest spread [\d.e-]+ decades \((lr|sr)\), 0.01 to converge", line)
                for line in lines[:3]), lines
     assert re.fullmatch(r"generation 6: widest spread [\d.e-]+ decades \((lr|sr)\), 0.01 to converge; (at the rates "

@@ -284,6 +284,7 @@ class Worker:
                 claim = self._ask(n, completed)
                 if claim is not None:
                     self._claimed_at = time.monotonic()
+                    self._log_new_spread()
                     return claim
                 continue
             reason = (f"generation {slots.generation} is full ({slots.running} of its trials are running in other "
@@ -334,6 +335,13 @@ class Worker:
             convergence.record(self.study, rule, verdict)
             self.log(f"converged at generation {verdict.generation} ({verdict.trials} trials): {rule.describe()}")
         return True
+
+    def _log_new_spread(self) -> None:
+        """Logs the spread of the distribution that the trials just asked were sampled from, as their generation
+        starts (CMA-ES stores it when it samples a generation's first trial)."""
+        rule = self.worker.until_converged
+        if rule is not None and self.ledger.cma:
+            self._log_spread(convergence.judge(self.study, self.config.space, self.config.generation_size, rule), rule)
 
     def _log_spread(self, verdict: convergence.Verdict, rule: convergence.Convergence) -> None:
         """Logs, once per generation sampled from a new distribution, its widest spread and the projected stop."""

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import time
 from pathlib import Path
 from typing import Callable
@@ -142,8 +143,10 @@ def plan(experiment: Experiment, scale: Scale, folder: Path, backend: str = "aut
     return plans
 
 
+@functools.lru_cache(maxsize=None)
 def _rate(env_id: str, backend: str) -> float:
-    """Rough agent-steps/s of ``env_id`` here: nominal on JAX, from a measured env step on the host backends."""
+    """Rough agent-steps/s of ``env_id`` here: nominal on JAX, from a measured env step on the host backends,
+    measured once per process, so that the estimates a command prints are at one rate."""
     resolved = envs.resolve_backend(env_id, backend)
     if resolved == "jax":
         return JAX_RATE
