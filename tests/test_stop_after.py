@@ -42,30 +42,23 @@ def _study(path, name="s", config=CONFIG):
     return open_study(f"journal:{path}", name, make_sampler("cmaes", 2, 0), encode_study_record(config))
 
 
-def _one_generation(path, name="s", config=CONFIG):
-    """A study with its first generation trained; its time in seconds."""
-    study = _study(path, name, config)
-    evolve(study, _trials(config, 2))
-    span = generation_seconds(study.get_trials(deepcopy=False), 2)
-    assert span is not None and span > 0
-    return study, span
-
-
-def _slow_first_generation(path, pause_s=3.0):
-    """A study (as ``ermrl evolve FLAGS`` makes it) whose first generation took at least ``pause_s`` seconds: its
-    training pauses once, in the progress callback, so that the CLI's time limits below are shorter than that
-    generation however fast this machine trains (its program may already be compiled in this process)."""
+def _one_generation(path, name="s", config=CONFIG, pause_s=0.0):
+    """A study (as ``ermrl evolve FLAGS`` makes it, for the default ``config``) with its first generation trained;
+    its time in seconds. With ``pause_s``, the training pauses once that long in the progress callback, so that the
+    generation takes at least that long however fast this machine trains (its program may already be compiled in
+    this process) and a CLI time limit shorter than the pause is shorter than the generation."""
     paused = []
 
     def pause(progress):
-        if not paused:
+        if pause_s and not paused:
             paused.append(progress)
             time.sleep(pause_s)
 
-    study = _study(path)
-    evolve(study, _trials(CONFIG, 2), progress_fn=pause)
-    assert paused and generation_seconds(study.get_trials(deepcopy=False), 2) >= pause_s
-    return study
+    study = _study(path, name, config)
+    evolve(study, _trials(config, 2), progress_fn=pause)
+    span = generation_seconds(study.get_trials(deepcopy=False), 2)
+    assert span is not None and span > 0 and span >= pause_s
+    return study, span
 
 
 def _trials(config, n):
@@ -129,7 +122,7 @@ def test_studies_evolved_together_give_back_the_round_they_claimed(tmp_path):
 
 def test_the_command_stops_with_one_line_and_exit_status_75_and_resumes(tmp_path):
     storage = str(tmp_path / "studies.log")
-    _slow_first_generation(storage)  # 3 s or more, against a limit of 1 s
+    _one_generation(storage, pause_s=3.0)  # 3 s or more, against a limit of 1 s
     stopped = ermrl("evolve", *FLAGS, "--trials", "4", "--storage", storage, "--study", "s", "--stop-after", "1s")
     assert stopped.returncode == OUT_OF_TIME == 75, stopped.stderr
     last = stopped.stdout.strip().splitlines()[-1]
@@ -156,7 +149,7 @@ def test_an_experiment_starts_no_test_phase_once_the_limit_has_passed(evolved, t
 
 def test_reproduce_hands_the_time_left_to_its_commands(tmp_path):
     storage = str(tmp_path / "studies.log")
-    _slow_first_generation(storage)
+    _one_generation(storage, pause_s=3.0)
     step = Step("timed", (), "an evolution under a time limit",
                 (Run("ermrl", ("evolve", *FLAGS, "--trials", "4", "--storage", storage, "--study", "s")),))
     # a real `python -m ermrl.cli` process, given --stop-after 1s (the whole seconds left): it starts, then stops
