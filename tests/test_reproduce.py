@@ -55,13 +55,32 @@ def test_dry_run_prints_the_exact_commands():
     run = ("ermrl experiment run locomotion --scale converged --storage docs/data/locomotion-converged/studies.log "
            "--out runs/experiments/locomotion-converged --baseline-store docs/data/baseline-models --only {}-2res "
            "--test-seeds 10 --test-timesteps 1000000")
-    assert [x for x in lines if x.startswith("ermrl")] == [run.format(s) for s in ("halfcheetah", "swimmer", "ant")]
+    assert [x for x in lines if x.startswith("ermrl experiment")] == [run.format(s)
+                                                                       for s in ("halfcheetah", "swimmer", "ant")]
     assert lines[1:5] == ["# restore docs/data/locomotion-converged -> runs/experiments/locomotion-converged",
                           run.format("halfcheetah"),
                           "# collect runs/experiments/locomotion-converged -> docs/data/locomotion-converged",
                           "# stash runs/experiments/locomotion-converged -> docs/data/locomotion-converged (also when "
                           "the run stops)"]
-    assert len(lines) == 13
+    # each finished study is compared with PPO and the small study's Φ* before the next one starts
+    d = "docs/data/locomotion-converged/halfcheetah-2res"
+    assert lines[5] == (
+        f"ermrl compare 'converged study={d}/test/summary.json' 'small study=docs/data/locomotion-small/halfcheetah-2res/"
+        "test/summary.json' --compare 'converged study' 'PPO (same observation)' --compare 'converged study' 'small "
+        f"study' --title 'Φ* of the converged and the small study' --figure {d}/comparison.png | tee "
+        f"{d}/comparison.md")
+    assert len(lines) == 16
+
+
+def test_the_converged_generalization_groups_are_compared_on_their_held_out_envs():
+    r = ermrl("reproduce", "--dry-run", "h3_converged")
+    assert r.returncode == 0, r.stderr
+    compares = [x for x in r.stdout.splitlines() if x.startswith("ermrl compare")]
+    d, small = "docs/data/generalization-morphology-converged", "docs/data/generalization-morphology-small"
+    assert [x.split("'")[1] for x in compares] == [
+        f"converged study={d}/to-{t}/test-{env}/summary.json"
+        for t, env in (("ant", "Ant-v5"), ("halfcheetah", "HalfCheetah-v5"), ("swimmer", "Swimmer-v5"))]
+    assert all(x.split("'")[3].startswith(f"small study={small}/") and x.endswith("/comparison.md") for x in compares)
 
 
 def test_an_interim_generalization_test_runs_on_the_held_out_env():

@@ -4,7 +4,8 @@ studies at `small` and `converged`, the FFT of their agents, the HP maps (as dat
 from __future__ import annotations
 
 from ermrl.experiments.reproduction.actions import (
-    NOT_SAVED, TEST10, Collect, Exists, MakeDirs, Missing, Step, compare, ermrl, experiment, made, python, step,
+    NOT_SAVED, TEST10, Collect, Exists, MakeDirs, Missing, Run, Step, compare, ermrl, experiment, made, python,
+    step,
 )
 
 SMALL = "docs/data/locomotion-small"
@@ -23,10 +24,23 @@ def h2() -> Step:
 
 
 def h2_converged() -> Step:
+    actions = [(experiment("locomotion", "converged", "--only", f"{s}-2res", TEST10),
+                _against_small(f"{CONVERGED}/{s}-2res", f"{CONVERGED}/{s}-2res/test/summary.json",
+                               f"{SMALL}/{s}-2res/test/summary.json"))
+               for s in ("halfcheetah", "swimmer", "ant")]
     return step("h2_converged", "C7", "C7 at --scale converged: each evolution until CMA-ES has converged (at most 900 "
-                "trials), then selection and 10 × 1M against PPO; one study at a time, HalfCheetah first",
-                [experiment("locomotion", "converged", "--only", f"{s}-2res", TEST10)
-                 for s in ("halfcheetah", "swimmer", "ant")])
+                "trials), then selection and 10 × 1M against PPO and the small study's Φ*; one study at a time, "
+                "HalfCheetah first", actions)
+
+
+def _against_small(folder: str, summary: str, small_summary: str) -> Run:
+    """``ermrl compare`` of a converged study's test phase (``summary``) against its PPO and the small study's Φ*
+    on the same seeds, into ``folder/comparison.{md,png}``."""
+    label = "converged study"
+    return compare(f"{label}={summary}", f"small study={small_summary}",
+                   "--compare", label, "PPO (same observation)", "--compare", label, "small study",
+                   "--title", "Φ* of the converged and the small study", "--figure", f"{folder}/comparison.png",
+                   tee=f"{folder}/comparison.md")
 
 
 CONVERGED = "docs/data/locomotion-converged"
@@ -85,8 +99,13 @@ def _interim(study: str, journal_dir: str, name: str, generation: int, small_sum
 
 
 def h3_converged() -> Step:
-    return step("h3_converged", "C10", "C10 at --scale converged: the three generalization groups",
-                experiment("generalization-morphology", "converged", TEST10))
+    held_out = [(t, ENV_IDS[t]) for t in TRIO]
+    return step("h3_converged", "C10", "C10 at --scale converged: the three generalization groups, each Φ* tested on "
+                "its held-out env against PPO and the small study's Φ*",
+                experiment("generalization-morphology", "converged", TEST10),
+                [_against_small(f"{GENERALIZATION}/to-{t}", f"{GENERALIZATION}/to-{t}/test-{env}/summary.json",
+                                f"docs/data/generalization-morphology-small/to-{t}/test-{env}/summary.json")
+                 for t, env in held_out])
 
 
 def c8_converged() -> Step:
