@@ -136,6 +136,7 @@ def test_the_replay_on_the_paper_study_stops_at_generation_32_and_copies_the_stu
            "compute)" in run.stdout
     summary = json.loads((out / "convergence.json").read_text())
     assert (summary["stop_generation"], summary["trials_to_stop"], summary["trials"]) == (32, 198, 900)
+    assert summary["generations"] == 150  # 0–149, popsize 6
     assert max(summary["mean_shift_decades"].values()) < 0.01
     assert (out / "convergence.png").stat().st_size > 10_000
     header = (out / "convergence.csv").read_text().splitlines()[0]
@@ -160,6 +161,9 @@ def test_a_study_cut_before_it_converged_is_projected_to_converge_near_where_it_
     run = cli("convergence", "--study", PAPER_STUDY, "--storage", cut, "--out", tmp_path / "b")
     assert run.returncode == 0, run.stderr
     assert f"study '{PAPER_STUDY}' has not converged by the rule" in run.stdout
+    complete = sum(t.state == TrialState.COMPLETE for t in load_study(cut, PAPER_STUDY).trials)
+    assert f"in its 22 generations (0–21; {complete} trials)" in run.stdout
+    assert json.loads((tmp_path / "b" / "convergence.json").read_text())["generations"] == 22
     said = re.search(r"at the rates of generations 12–21 \((\w+)'s spread shrinks slowest, × (0\.\d+) a generation\), "
                      r"the rule would hold at about generation (\d+), ([\d,]+) trials: within the study's limit of "
                      r"900 trials", run.stdout)

@@ -61,13 +61,14 @@ def cmd_convergence(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     spread.write_table(out / "convergence.csv", dists)
     spread.figure(dists, rule, verdict.generation, f"{args.study}: Φ spread per generation", out / "convergence.png")
-    total = sum(t.state == TrialState.COMPLETE for t in trials)
+    complete = [t for t in trials if t.state == TrialState.COMPLETE]
+    total, generations = len(complete), 1 + max(int(t.user_attrs.get(GENERATION, 0)) for t in complete)
     summary = {"study": args.study, "rule": {"width": rule.width, "generations": rule.generations},
                "stop_generation": verdict.generation, "trials_to_stop": verdict.trials, "trials": total,
-               "generations": max(dists), **spread.summary(dists, verdict.generation)}
+               "generations": generations, **spread.summary(dists, verdict.generation)}
     if verdict.generation is None:
-        print(f"study {args.study!r} has not converged by the rule ({rule.describe()}) in its {max(dists)} "
-              f"generations ({total} trials)")
+        print(f"study {args.study!r} has not converged by the rule ({rule.describe()}) in its {generations} "
+              f"generations (0–{generations - 1}; {total} trials)")
         summary["projection"] = _projection(convergence.project(verdict.spread, rule), config)
         if summary["projection"] is not None:
             summary["fitness_correlations"] = _correlations(trials, config, summary["projection"]["window"])
