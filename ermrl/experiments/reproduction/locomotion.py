@@ -33,14 +33,13 @@ def h2_converged() -> Step:
                 "HalfCheetah first", actions)
 
 
-def _against_small(folder: str, summary: str, small_summary: str) -> Run:
-    """``ermrl compare`` of a converged study's test phase (``summary``) against its PPO and the small study's Φ*
-    on the same seeds, into ``folder/comparison.{md,png}``."""
-    label = "converged study"
+def _against_small(folder: str, summary: str, small_summary: str, label: str = "converged study",
+                   title: str = "Φ* of the converged and the small study") -> Run:
+    """``ermrl compare`` of a converged study's test phase (``summary``, named ``label``) against its PPO and the
+    small study's Φ* on the same seeds, into ``folder/comparison.{md,png}``."""
     return compare(f"{label}={summary}", f"small study={small_summary}",
                    "--compare", label, "PPO (same observation)", "--compare", label, "small study",
-                   "--title", "Φ* of the converged and the small study", "--figure", f"{folder}/comparison.png",
-                   tee=f"{folder}/comparison.md")
+                   "--title", title, "--figure", f"{folder}/comparison.png", tee=f"{folder}/comparison.md")
 
 
 CONVERGED = "docs/data/locomotion-converged"
@@ -83,7 +82,7 @@ def _interim(study: str, journal_dir: str, name: str, generation: int, small_sum
     trials copied aside, the top 5 on 5 seeds, Φ* 10 × 1M (on ``test_env``, else the evolution's env) against PPO
     and the small study's Φ* (``small_summary``)."""
     d = f"{journal_dir}/{name}"
-    where, label = ("--study", study, "--storage", f"{d}/studies.log"), f"converged study, generation {generation}"
+    where = ("--study", study, "--storage", f"{d}/studies.log")
     test = f"{d}/test-{test_env}" if test_env else f"{d}/test"
     return (
         python("paper/study_so_far.py", "--study", study, "--storage", f"journal:{journal_dir}/studies.log",
@@ -92,10 +91,8 @@ def _interim(study: str, journal_dir: str, name: str, generation: int, small_sum
         ermrl("test", where, "--out", d, *(("--env", test_env) if test_env else ()), "--seeds", 10, "--timesteps",
               1000000, "--auc-steps", 300000, "--baseline-store", "docs/data/baseline-models", NOT_SAVED,
               skip_if=made(f"{test}/summary.json")),
-        compare(f"{label}={test}/summary.json", f"small study={small_summary}",
-                "--compare", label, "PPO (same observation)", "--compare", label, "small study",
-                "--title", f"Φ* after {generation + 1} CMA-ES generations",
-                "--figure", f"{d}/comparison.png", tee=f"{d}/comparison.md"))
+        _against_small(d, f"{test}/summary.json", small_summary, f"converged study, generation {generation}",
+                       f"Φ* after {generation + 1} CMA-ES generations"))
 
 
 def h3_converged() -> Step:
