@@ -49,9 +49,10 @@ def make_storage(url: str, heartbeat: tuple[int, int] | None = None) -> optuna.s
             path = storage_file(url).absolute()  # the lock link's target: a relative one would dangle
             path.parent.mkdir(parents=True, exist_ok=True)
             from ermrl.atomic import journal_lock, repair_journal
+            from ermrl.evolution.journal_file import CheckedJournalFile
 
             repair_journal(path)  # a torn last line (a writer killed mid-append, a full disk) would poison the next append
-            backend = optuna.storages.journal.JournalFileBackend(str(path), lock_obj=journal_lock(path))
+            backend = CheckedJournalFile(str(path), lock_obj=journal_lock(path))
             return optuna.storages.JournalStorage(backend)
         if url.startswith("sqlite:///"):
             _check_sqlite(storage_file(url))
