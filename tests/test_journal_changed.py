@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 import subprocess
+import sys
 import time
 
 import optuna
@@ -133,3 +134,43 @@ def test_an_evolution_whose_journal_is_put_back_to_an_older_copy_stops_with_one_
         r"pull, or a copy over it\?\); stop every run on it, put back the copy they wrote to, and rerun to continue",
         err.strip().splitlines()[-1]), err
     assert journal.read_bytes() == older  # nothing appended to the copy put back
+
+
+STOPPED_BY_ITS_HEARTBEAT = """
+import sys
+import optuna
+from ermrl.evolution.config import EvolveConfig
+from ermrl.evolution.evolve import evolve
+from ermrl.evolution.search_space import SearchSpace
+from ermrl.evolution.study import make_storage
+from ermrl.evolution.workers import WorkerConfig
+from ermrl.training import TrainConfig
+study = optuna.create_study(storage=make_storage("journal:" + sys.argv[1]), study_name="s", direction="maximize",
+                            sampler=optuna.samplers.RandomSampler(seed=0))
+config = EvolveConfig(train=TrainConfig(env_id="CartPole-v1", total_timesteps=500_000_000), space=SearchSpace(1),
+                      trials=2, seeds=1, sampler="random", popsize=2)
+evolve(study, config, worker=WorkerConfig(heartbeat_interval=1))  # no progress_fn: nothing else reads the journal
+"""
+
+
+def test_an_evolution_stops_within_its_generation_once_its_heartbeat_finds_the_journal_rewritten(tmp_path):
+    """Evolution through the library with no progress reports reads the journal only in its heartbeat thread
+    until its generation ends; that generation would train for hours, so only the stop the heartbeat hands to
+    the main thread (raised at the next PPO iteration) ends the run in time, and it writes nothing more."""
+    journal = tmp_path / "j.log"
+    proc = subprocess.Popen([sys.executable, "-c", STOPPED_BY_ITS_HEARTBEAT, str(journal)], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for(lambda: journal.exists() and journal.read_bytes().count(b'"ermrl:heartbeat"') >= 2, proc)
+        lines = journal.read_bytes().splitlines(keepends=True)
+        first_trial = next(k for k, line in enumerate(lines) if b'"op_code":4' in line)
+        older = b"".join(lines[:first_trial])  # the study as an earlier commit held it, before these trials
+        journal.write_bytes(older)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1, err
+    assert err.strip().splitlines()[-1].startswith(
+        f"ermrl.evolution.journal_file.JournalChanged: the journal {journal} was rewritten while this run used "
+        "it: it had read its first "), err
+    assert journal.read_bytes() == older

@@ -35,6 +35,7 @@ from optuna.storages._heartbeat import is_heartbeat_enabled
 from optuna.trial import FrozenTrial, TrialState
 
 from ermrl import provenance
+from ermrl.evolution.journal_file import JournalChanged
 
 HEARTBEAT_ATTR = "ermrl:heartbeat"
 """The trial system attribute holding the last heartbeat (Unix time) where Optuna has no heartbeats."""
@@ -206,6 +207,9 @@ class Heartbeat:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._failures = 0
+        self.fatal: JournalChanged | None = None
+        """The error that stopped the beats for good: the journal was rewritten under the run. The worker's
+        main thread raises it at its next progress report (``Worker.check_terminated``)."""
 
     @property
     def trial_ids(self) -> set[int]:
@@ -255,6 +259,9 @@ class Heartbeat:
                         break  # this beat stands for all this worker's trials (WorkerId.lost_reason)
                 except UpdateFinishedTrialError:  # failed meanwhile by another worker; the tell will say so
                     self.remove(trial_id)
+                except JournalChanged as e:  # no write can succeed now; the main thread stops the run
+                    self.fatal = e
+                    return
                 except Exception as e:  # a database hiccup must not kill training; the next beat retries
                     self._failures += 1
                     if self._failures in (1, 10, 100):

@@ -33,6 +33,7 @@ from ermrl.evolution.convergence import Convergence
 from ermrl.evolution.generations import ATTR, CMA_GENERATION, FULL, Ledger
 from ermrl.evolution.heartbeat import (GRACE_PERIOD_S, INTERRUPTED, INTERVAL_S, LOST_PREFIX, WORKER_ATTR, Heartbeat,
                                        WorkerId, fail_lost, fail_trial, optuna_heartbeat)
+from ermrl.evolution.journal_file import JournalChanged
 
 POLL_S = 1.0
 """Seconds between two looks at the study while waiting for a free slot."""
@@ -211,7 +212,8 @@ class Worker:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
-            if self.heartbeat.trial_ids:
+            # a rewritten journal takes no write: its next run fails the trials still held ("interrupted")
+            if self.heartbeat.trial_ids and not isinstance(exc, JournalChanged):
                 stopped = self.terminated or exc_type is None or issubclass(exc_type, (KeyboardInterrupt, SystemExit))
                 self.release(INTERRUPTED if stopped else f"worker error ({exc_type.__name__})")
         finally:
@@ -240,9 +242,13 @@ class Worker:
         self.check_terminated()
 
     def check_terminated(self) -> None:
-        """Raises ``SystemExit(143)`` if SIGTERM came, even where its first exception was dropped."""
+        """Raises ``SystemExit(143)`` if SIGTERM came, even where its first exception was dropped, and the
+        heartbeat thread's :class:`~ermrl.evolution.journal_file.JournalChanged` if it found the journal
+        rewritten (called at each progress report, so a run stops within an iteration, not at its batch's end)."""
         if self.terminated:
             raise SystemExit(TERMINATED)
+        if self.heartbeat.fatal is not None:
+            raise self.heartbeat.fatal
 
     def release(self, reason: str) -> None:
         """Fails every trial this worker still holds, so that nobody waits for them."""
