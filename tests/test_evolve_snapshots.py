@@ -10,7 +10,8 @@ from ermrl.evolution.evolve import evolve
 from ermrl.evolution.record import encode_study_record
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_sampler, open_study
-from ermrl.evolution.workers import REDO_ATTR, WorkerConfig
+from ermrl.evolution.worker_config import WorkerConfig
+from ermrl.evolution.workers import REDO_ATTR
 from ermrl.training import TrainConfig
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)

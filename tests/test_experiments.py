@@ -381,7 +381,7 @@ def test_a_running_study_is_estimated_at_the_pace_of_its_last_generation(tmp_pat
     from ermrl.cli.experiment import pace_line
     from ermrl.evolution.evolve import evolve
     from ermrl.evolution.study import make_sampler, open_study
-    from ermrl.evolution.workers import generation_seconds
+    from ermrl.evolution.generations import generation_seconds
 
     (plan,) = [p for p in runner.plan(registry.get("partial-observability"), registry.get_scale("converged"),
                                       tmp_path) if p.spec.name == "cartpole-1res"]

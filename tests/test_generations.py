@@ -1,5 +1,5 @@
 """How workers share CMA-ES generations (the race rule of ``generations.Ledger``) and draw different candidates
-(``workers.worker_seed``): unit tests on plain Optuna studies."""
+(``worker_config.worker_seed``): unit tests on plain Optuna studies."""
 
 import warnings
 
@@ -8,7 +8,7 @@ from optuna.trial import TrialState
 
 from ermrl.evolution.generations import Ledger
 from ermrl.evolution.study import make_sampler
-from ermrl.evolution.workers import worker_seed
+from ermrl.evolution.worker_config import worker_seed
 
 
 def test_a_trial_fits_while_its_generation_has_room():

@@ -22,7 +22,7 @@ from ermrl.evolution.scoring import Baseline
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_sampler, open_study
 from ermrl.evolution.record import encode_study_record
-from ermrl.evolution.workers import WorkerConfig
+from ermrl.evolution.worker_config import WorkerConfig
 from ermrl.training import TrainConfig
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)

@@ -143,7 +143,7 @@ from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.evolve import evolve
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_storage
-from ermrl.evolution.workers import WorkerConfig
+from ermrl.evolution.worker_config import WorkerConfig
 from ermrl.training import TrainConfig
 study = optuna.create_study(storage=make_storage("journal:" + sys.argv[1]), study_name="s", direction="maximize",
                             sampler=optuna.samplers.RandomSampler(seed=0))

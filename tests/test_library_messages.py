@@ -154,7 +154,7 @@ def _raised(make) -> ConfigError:
 def test_config_dataclasses_name_their_fields():
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.search_space import SearchSpace
-    from ermrl.evolution.workers import WorkerConfig
+    from ermrl.evolution.worker_config import WorkerConfig
     from ermrl.experiments.evaluation import TestConfig
     from ermrl.experiments.runner import TestBudget
 

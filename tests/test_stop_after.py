@@ -20,7 +20,9 @@ from ermrl.evolution.evolve import Member, evolve, evolve_together
 from ermrl.evolution.record import encode_study_record
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_sampler, open_study
-from ermrl.evolution.workers import REDO_ATTR, Worker, WorkerConfig, generation_seconds
+from ermrl.evolution.generations import generation_seconds
+from ermrl.evolution.worker_config import WorkerConfig
+from ermrl.evolution.workers import REDO_ATTR, Worker
 from ermrl.experiments import registry, runner
 from ermrl.experiments.reproduction.actions import Run, Step
 from ermrl.experiments.reproduction.execute import run_step

@@ -24,7 +24,8 @@ from ermrl.evolution.generations import FULL
 from ermrl.evolution.heartbeat import WORKER_ATTR
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
-from ermrl.evolution.workers import Worker, WorkerConfig
+from ermrl.evolution.worker_config import WorkerConfig
+from ermrl.evolution.workers import Worker
 from ermrl.evolution.record import encode_study_record
 from ermrl.training import TrainConfig
 

@@ -50,7 +50,7 @@ def cmd_evolve(args) -> int:
     from ermrl.evolution.evolve import count, estimate_seconds, evolve, make_trainers
     from ermrl.evolution.study import (ATTR, SAMPLERS, check_resumable, check_writable, make_sampler, open_study,
                                        shown_url)
-    from ermrl.evolution.workers import WorkerConfig, worker_seed
+    from ermrl.evolution.worker_config import WorkerConfig, worker_seed
     from ermrl.experiments import baseline_runs
     from ermrl.training import memory
 

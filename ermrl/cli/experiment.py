@@ -188,7 +188,8 @@ def pace_line(p, study) -> str | None:
     from optuna.trial import TrialState
 
     from ermrl.evolution import convergence
-    from ermrl.evolution.workers import duration_text, generation_seconds
+    from ermrl.evolution.generations import generation_seconds
+    from ermrl.evolution.workers import duration_text
 
     trials = study.get_trials(deepcopy=False)
     size, limit = p.config.generation_size, p.config.trials

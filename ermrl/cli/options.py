@@ -206,7 +206,7 @@ def _groups() -> dict[str, list[Option]]:
     from ermrl.evolution.config import EvolveConfig
     from ermrl.evolution.convergence import Convergence
     from ermrl.evolution.search_space import SearchSpace
-    from ermrl.evolution.workers import WorkerConfig
+    from ermrl.evolution.worker_config import WorkerConfig
     from ermrl.experiments.evaluation import TestConfig
     from ermrl.ppo.config import PPOConfig
     from ermrl.reservoir import ReservoirSpec

@@ -35,7 +35,8 @@ from ermrl.errors import OutOfTime, RunFailed
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.scoring import score
 from ermrl.evolution.heartbeat import INTERRUPTED
-from ermrl.evolution.workers import Worker, WorkerConfig
+from ermrl.evolution.worker_config import WorkerConfig
+from ermrl.evolution.workers import Worker
 from ermrl.training import Population, Progress, Results, Trainer
 
 MAX_FAILED_BATCHES = 3

@@ -102,3 +102,18 @@ class Ledger:
         while labels.count(generation) >= self.popsize:
             generation += 1
         return generation
+
+
+def generation_seconds(trials: list[FrozenTrial], size: int) -> float | None:
+    """The wall time of the study's last generation whose ``size`` trials all completed: from its first trial's
+    start to its last one's end (with several workers, about one batch's time); None when there is none."""
+    by: dict[int, list[FrozenTrial]] = {}
+    for t in trials:
+        if t.state == TrialState.COMPLETE and isinstance(t.user_attrs.get(ATTR), int) \
+                and t.datetime_start is not None and t.datetime_complete is not None:
+            by.setdefault(t.user_attrs[ATTR], []).append(t)
+    full = [g for g, ts in by.items() if len(ts) >= size]
+    if not full:
+        return None
+    last = by[max(full)]
+    return (max(t.datetime_complete for t in last) - min(t.datetime_start for t in last)).total_seconds()

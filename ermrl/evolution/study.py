@@ -321,7 +321,7 @@ def _current(record: dict) -> dict:
 def _comparable(record: dict) -> str:
     """The config without the fields that may change between a run and its resumption: the trial target, the
     baselines (a resumed study keeps the constants it started with) and the env workers, threads and training
-    processes (results do not depend on them). A worker's own settings (``workers.WorkerConfig``: batch, index,
+    processes (results do not depend on them). A worker's own settings (``worker_config.WorkerConfig``: batch, index,
     heartbeats) are not in the record at all."""
     keep = {k: v for k, v in record.items() if k not in ("trials", "baselines")}
     if isinstance(keep.get("train"), dict):

@@ -280,7 +280,7 @@ def run_experiment(experiment: Experiment, scale: Scale, folder: Path, storage_u
     from ermrl.evolution.evolve import Member, evolve_together, make_trainers, shared_envs
     from ermrl.evolution.selection import load_selection, select
     from ermrl.evolution.study import ATTR, make_sampler, open_study
-    from ermrl.evolution.workers import WorkerConfig
+    from ermrl.evolution.worker_config import WorkerConfig
     from ermrl.experiments import baseline_runs, baselines, checkpoints
     from ermrl.experiments.evaluation import run_test_phase, test_dir
 
