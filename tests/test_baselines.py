@@ -71,7 +71,7 @@ def test_an_entrys_recorded_command_gives_back_its_settings():
     """The command kept with a PPO entry reruns it: parsed again, its flags give the same settings."""
     import shlex
 
-    from ermrl.cli import options, parse
+    from ermrl.cli import configs, parse
     from ermrl.experiments.baseline_runs import _flags
     from ermrl.ppo.config import PPOConfig
 
@@ -79,7 +79,7 @@ def test_an_entrys_recorded_command_gives_back_its_settings():
                 PPOConfig(hidden=(64,), activation="relu", ortho_init=False)):  # rl-zoo's recurrent Pendulum policy
         settings = bl.ppo_settings(ppo)
         argv = shlex.split(" ".join(["baselines", "--env", "Pendulum-v1", *_flags(settings)]))
-        assert bl.ppo_settings(options.ppo_config(parse(argv))) == settings
+        assert bl.ppo_settings(configs.ppo_config(parse(argv))) == settings
 
 
 def test_a_damaged_table_is_a_one_line_error(tmp_path):

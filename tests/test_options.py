@@ -10,7 +10,7 @@ import pytest
 from ermrl import load_agent
 from ermrl.agent import AgentConfig
 from ermrl.cli import build_parser, parse
-from ermrl.cli import options
+from ermrl.cli import configs
 from ermrl.cli.options import AGENT_DESTS, PPO_FIELDS, field_docs
 from ermrl.errors import ConfigError
 from ermrl.ppo.config import PPOConfig
@@ -100,9 +100,9 @@ def test_ppo_hyperparameters_override_the_preset_and_reach_the_training(tmp_path
                 "clip_range": 0.1, "ent_coef": 0.01, "vf_coef": 0.25, "max_grad_norm": 1.0, "normalize": True,
                 "use_sde": True, "sde_sample_freq": 4}
     for command in ("train", "evolve", "baselines --env CartPole-v1"):
-        ppo = options.ppo_config(parse([*command.split(), *zoo, "--preset", "fast", "--learning-rate", "1e-3"]))
+        ppo = configs.ppo_config(parse([*command.split(), *zoo, "--preset", "fast", "--learning-rate", "1e-3"]))
         assert {k: getattr(ppo, k) for k in expected} == expected and ppo.learning_rate == 1e-3, command
-    fast = options.ppo_config(parse(["evolve", "--preset", "fast", "--gamma", "0.9"]))  # the rest stays the preset's
+    fast = configs.ppo_config(parse(["evolve", "--preset", "fast", "--gamma", "0.9"]))  # the rest stays the preset's
     assert (fast.n_envs, fast.n_steps, fast.n_epochs, fast.gamma, fast.normalize) == (8, 256, 4, 0.9, False)
     out = tmp_path / "run"
     r = ermrl("train", "--env", "PendulumNoVel-v1", "--no-reservoir", "--seeds", "1", "--timesteps", "200", *zoo,
@@ -163,10 +163,10 @@ def test_missing_config_file(tmp_path):
 def test_ppo_settings_are_checked_together():
     """A PPO-LSTM window longer than the preset's batch is fine when the batch given with it holds whole windows
     (rl-zoo's RecurrentPPO settings: 128-step minibatches); a batch that does not is one error naming both."""
-    ppo = options.ppo_config(parse(["train", "--model", "lstm", "--batch-size", "128", "--lstm-seq-len", "128"]))
+    ppo = configs.ppo_config(parse(["train", "--model", "lstm", "--batch-size", "128", "--lstm-seq-len", "128"]))
     assert (ppo.model, ppo.batch_size, ppo.lstm_seq_len) == ("lstm", 128, 128)
     with pytest.raises(ConfigError, match="^batch_size 64 must be a multiple of lstm_seq_len 128"):
-        options.ppo_config(parse(["train", "--model", "lstm", "--lstm-seq-len", "128"]))
+        configs.ppo_config(parse(["train", "--model", "lstm", "--lstm-seq-len", "128"]))
 
 
 def test_an_old_config_file_with_lr_still_sets_the_leak_rate_and_the_new_names_work(tmp_path):
@@ -208,10 +208,10 @@ def test_a_config_file_with_the_learning_rates_old_keys_sets_their_options_of_to
     assert {k: getattr(args, k) for k in expected} == expected
     assert not any(hasattr(args, old) for old in ("ppo_lr", "ermrl_lr", "test_lrs"))
     if command == "train":
-        assert options.ppo_config(args).learning_rate == 1e-4
+        assert configs.ppo_config(args).learning_rate == 1e-4
         assert parse(["train", "--config", str(path), "--learning-rate", "3e-4"]).learning_rate == 3e-4
     if command.startswith("test"):
         from ermrl.experiments.evaluation import TestConfig
 
-        assert options.test_config(args) == TestConfig(learning_rates=tuple(expected["learning_rates"]),
+        assert configs.test_config(args) == TestConfig(learning_rates=tuple(expected["learning_rates"]),
                                                        baseline_learning_rate=expected["baseline_learning_rate"])

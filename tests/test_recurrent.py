@@ -282,14 +282,14 @@ def test_unsupported_combinations_fail_in_one_line():
 
 def test_command_line(tmp_path, capsys):
     """`ermrl train --model lstm --lstm-hidden N` and `ermrl test --recurrent-baseline`; one-line errors."""
-    from ermrl.cli import main, options, parse
+    from ermrl.cli import configs, main, parse
 
     args = parse(["train", "--model", "lstm", "--lstm-hidden", "32", "--lstm-seq-len", "32"])
-    config = options.train_config(args, args.env, 0)
+    config = configs.train_config(args, args.env, 0)
     assert (config.ppo.model, config.ppo.lstm_hidden_size, config.ppo.lstm_seq_len) == ("lstm", 32, 32)
-    assert options.ppo_config(parse(["train"])).model == "ff"
-    assert options.test_config(parse(["test", "--study", "s", "--recurrent-baseline"])).recurrent_baseline
-    assert not options.test_config(parse(["test", "--study", "s"])).recurrent_baseline
+    assert configs.ppo_config(parse(["train"])).model == "ff"
+    assert configs.test_config(parse(["test", "--study", "s", "--recurrent-baseline"])).recurrent_baseline
+    assert not configs.test_config(parse(["test", "--study", "s"])).recurrent_baseline
     for flags, message in ((["--backend", "host"], "the LSTM baseline (--model lstm) runs on the JAX backend only"),
                            (["--lstm-seq-len", "48"], "batch_size 64 must be a multiple of lstm_seq_len 48")):
         out = tmp_path / "run"

@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-from ermrl.cli import common, evolve, options
+from ermrl.cli import common, configs, evolve, options
 from ermrl.errors import ConfigError
 
 # -- parsers ---------------------------------------------------------------------------------------------
@@ -144,7 +144,7 @@ def cmd_train(args) -> int:
     from ermrl.training import Population, Trainer, memory
 
     k = 0 if args.no_reservoir or args.model == "lstm" else args.reservoirs
-    info = options.describe_env(args, args.env)  # fail fast: an unknown id, a missing extra, settings it cannot take
+    info = configs.describe_env(args, args.env)  # fail fast: an unknown id, a missing extra, settings it cannot take
     if args.tensorboard is not None:
         tensorboard.check_logdir(args.tensorboard)
     if args.seeds < 1:
@@ -160,7 +160,7 @@ def cmd_train(args) -> int:
         raise ConfigError("--skip-connection feeds the observation beside a reservoir's context, but "
                           + ("--model lstm" if args.model == "lstm" else "--no-reservoir")
                           + " has no reservoir and already sees the observation; drop --skip-connection")
-    config = options.train_config(args, args.env, k)
+    config = configs.train_config(args, args.env, k)
     if config.ppo.model == "lstm":
         from ermrl.training import recurrent
 
@@ -181,7 +181,7 @@ def cmd_train(args) -> int:
         results = Trainer(config).run(population, bar.update, snapshot=snapshot, snapshot_every_s=args.snapshot_every,
                                       log=print)
     with storage.staged_folder(out, stale=agent_files.AGENT_FILES) as stage:  # all or nothing: summary.json last
-        run = storage.write_train_run(stage, config, results, label, options.effective(args))
+        run = storage.write_train_run(stage, config, results, label, configs.effective(args))
         if args.save_agents:
             agent_files.write_agents(run.folder / agent_files.AGENTS_DIR, config, results, label)
         learning_curves({label: results.curves()}, f"{results.env_id}: {label}", run.figure)
@@ -271,7 +271,7 @@ def cmd_test(args) -> int:
 
     if args.tensorboard is not None:
         tensorboard.check_logdir(args.tensorboard)
-    test = options.test_config(args)
+    test = configs.test_config(args)
     if args.agents_per_run is not None and args.agents_per_run < 1:
         raise ConfigError(f"--agents-per-run must be >= 1, got {args.agents_per_run}")
     if args.baseline_store is not None:
@@ -329,14 +329,14 @@ def cmd_baselines(args) -> int:
     from ermrl.experiments import baseline_runs, baselines
 
     for env_id in args.env:
-        options.describe_env(args, env_id)
+        configs.describe_env(args, env_id)
     if args.seeds < 1 or args.random_episodes < 1:
         raise ConfigError(f"--seeds and --random-episodes must be >= 1, got {args.seeds} and {args.random_episodes}")
     if args.random_episodes > MAX_RANDOM_EPISODES:
         raise ConfigError(f"--random-episodes must be <= {MAX_RANDOM_EPISODES:,}, got {args.random_episodes}")
     for env_id in args.env:
-        common.check_memory(options.train_config(args, env_id, 0), args.seeds, "the PPO baseline")
-    ppo = options.ppo_config(args)
+        common.check_memory(configs.train_config(args, env_id, 0), args.seeds, "the PPO baseline")
+    ppo = configs.ppo_config(args)
     rate = ppo.learning_rate
     progress, close = common.bars(args.quiet)
     try:  # vanilla PPO trains with every PPO setting given (--gamma, --preset, ...), as the evolution's agents

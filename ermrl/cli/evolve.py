@@ -3,7 +3,7 @@ converged."""
 
 from __future__ import annotations
 
-from ermrl.cli import common, options
+from ermrl.cli import common, configs, options
 from ermrl.errors import ConfigError
 
 MAX_SAMPLER_SEED = 2**32 - 1
@@ -58,15 +58,15 @@ def cmd_evolve(args) -> int:
     if args.sampler not in SAMPLERS:
         raise ConfigError(f"unknown sampler {args.sampler!r}; choose one of {', '.join(SAMPLERS)}")
     env_ids = tuple(args.env or ["CartPoleNoVel-v1"])
-    infos = [options.describe_env(args, env_id) for env_id in env_ids]
+    infos = [configs.describe_env(args, env_id) for env_id in env_ids]
     if args.sampler_seed is not None and not 0 <= args.sampler_seed <= MAX_SAMPLER_SEED:
         raise ConfigError(f"--sampler-seed must be in 0..{MAX_SAMPLER_SEED} (NumPy's seeds), got {args.sampler_seed}")
-    config = EvolveConfig(train=options.train_config(args, env_ids[0]), space=options.search_space(args),
+    config = EvolveConfig(train=configs.train_config(args, env_ids[0]), space=configs.search_space(args),
                           trials=args.trials, seeds=args.seeds, sampler=args.sampler, popsize=args.popsize,
                           sampler_seed=args.sampler_seed, envs=env_ids if len(env_ids) > 1 else (),
                           normalization=args.normalization, seed_schedule=args.seed_schedule)
     worker = WorkerConfig(args.batch, args.worker_index, args.heartbeat_interval, args.grace_period,
-                          options.convergence_rule(args), args.snapshots, stop_at=stop_at)
+                          configs.convergence_rule(args), args.snapshots, stop_at=stop_at)
     if args.snapshots is not None:
         storage.check_folder(args.snapshots, "--snapshots")
     agents = min(worker.batch or config.generation_size, config.trials) * config.seeds  # trained at once, per env
