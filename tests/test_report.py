@@ -173,7 +173,7 @@ def test_running_time_counts_overlapping_trials_once_and_pauses_not_at_all(tmp_p
 
     from optuna.trial import FrozenTrial
 
-    from ermrl.analysis.report import running_time
+    from ermrl.analysis.trials import running_time
 
     study = make_study(1, n_complete=0, n_failed=0)
     t0 = dt.datetime(2026, 11, 23, 8, 0, 0)

@@ -13,7 +13,8 @@ from ermrl.model_labels import current, number
 from ermrl.analysis import statistics
 from ermrl.analysis.html import img, page, table
 from ermrl.analysis.hp_map import LEAK_RATE_HEADER, draw_hp_map, hp_map_points, leak_rate_rows
-from ermrl.analysis.report import ranked, skipped_note, test_dirs, test_phase_sections
+from ermrl.analysis.report import skipped_note, test_dirs, test_phase_sections
+from ermrl.analysis.trials import ranked
 from ermrl.errors import ConfigError
 
 def normalized_test_scores(rows_by_env: dict[str, list[dict]], random_returns: dict[str, float]) -> dict[str, np.ndarray]:

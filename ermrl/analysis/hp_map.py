@@ -19,7 +19,7 @@ from matplotlib.lines import Line2D
 
 from ermrl import storage
 from ermrl.analysis.html import markdown_table
-from ermrl.analysis.report import phi, ranked
+from ermrl.analysis.trials import phi, ranked
 from ermrl.errors import ConfigError
 from ermrl.evolution import record as study_record
 from ermrl.evolution.study import ATTR
@@ -65,7 +65,7 @@ class StudyPoints:
 def study_points(study: optuna.Study, top: int = 30) -> StudyPoints:
     """The ``top`` best completed trials of an ``ermrl evolve`` study and their (sr, lr) per reservoir.
 
-    Trials are ranked by report.ranked (completed, finite fitness, best first) and Φ read by report.phi. Raises
+    Trials are ranked by trials.ranked (completed, finite fitness, best first) and Φ read by trials.phi. Raises
     ConfigError (one line, naming the study) when it has no completed trial."""
     if top < 1:
         raise ConfigError(f"top must be >= 1, got {top}")

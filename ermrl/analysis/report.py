@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import collections
 import html
-import math
 import os
 import sys
 from pathlib import Path
@@ -20,8 +19,7 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
-from optuna.study import StudyDirection
-from optuna.trial import FrozenTrial, TrialState
+from optuna.trial import FrozenTrial
 
 from ermrl import storage
 from ermrl.analysis.html import img as _img
@@ -29,6 +27,7 @@ from ermrl.analysis.html import page
 from ermrl.analysis.html import table as _table
 from ermrl.analysis.plots import learning_curves
 from ermrl.analysis.statistics import format_ci
+from ermrl.analysis.trials import completed, failed, maximize, n_reservoirs, phi, ranked, running_time
 from ermrl.errors import ConfigError
 from ermrl.evolution.heartbeat import WORKER_ATTR
 from ermrl.model_labels import param_name
@@ -38,66 +37,9 @@ PHI_NAMES = {"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}
 """Φ's fields as a reader reads them; in RL, "lr" is a learning rate."""
 
 
-def _maximize(study: optuna.Study) -> bool:
-    return study.direction != StudyDirection.MINIMIZE
-
-
-def completed(study: optuna.Study) -> list[FrozenTrial]:
-    """Completed trials with a finite fitness, in trial-number order."""
-    return [t for t in study.trials
-            if t.state == TrialState.COMPLETE and t.value is not None and math.isfinite(t.value)]
-
-
-def failed(study: optuna.Study) -> list[FrozenTrial]:
-    return [t for t in study.trials if t.state == TrialState.FAIL]
-
-
-def ranked(study: optuna.Study) -> list[FrozenTrial]:
-    """Completed trials, best fitness first."""
-    return sorted(completed(study), key=lambda t: t.value, reverse=_maximize(study))
-
-
-def running_time(study: optuna.Study) -> tuple[float, float]:
-    """(running, span) in seconds over the completed trials: ``running`` is the time during which at least one of
-    them ran (the union of their [start, finish] intervals; overlapping workers count once), ``span`` the time from
-    the first start to the last finish. A study run in parts, with stops between them, has running < span. Failed
-    trials are left out: one failed by another worker after a stop ("worker lost") would span the stop. (0, 0)
-    before any trial completed."""
-    spans = sorted((t.datetime_start, t.datetime_complete) for t in study.get_trials(deepcopy=False)
-                   if t.state == TrialState.COMPLETE and t.datetime_start is not None
-                   and t.datetime_complete is not None)
-    if not spans:
-        return 0.0, 0.0
-    running, (start, end) = 0.0, spans[0]
-    for a, b in spans[1:]:
-        if a > end:
-            running += (end - start).total_seconds()
-            start, end = a, b
-        else:
-            end = max(end, b)
-    running += (end - start).total_seconds()
-    return running, (max(b for _, b in spans) - spans[0][0]).total_seconds()
-
-
 def _hms(seconds: float) -> str:
     s = round(seconds)
     return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
-
-
-def n_reservoirs(study: optuna.Study) -> int:
-    return int(study.user_attrs.get("ermrl", {}).get("reservoirs", 1))
-
-
-def phi(trial: FrozenTrial, k: int) -> dict[str, list[float]]:
-    """{"sr", "lr", "iss": K floats} from the trial's user_attrs, else from its params (iss may be missing)."""
-    if "phi" in trial.user_attrs:
-        return {name: [float(v) for v in vals] for name, vals in trial.user_attrs["phi"].items()}
-    out = {}
-    for name in ("sr", "lr", "iss"):
-        keys = [name] if k == 1 else [f"{name}_{i}" for i in range(1, k + 1)]
-        if all(key in trial.params for key in keys):
-            out[name] = [float(trial.params[key]) for key in keys]
-    return out
 
 
 def _save(fig, path: Path | str) -> Path:
@@ -112,7 +54,7 @@ def fitness_over_trials(study: optuna.Study, path: Path | str) -> Path:
     if done:
         x = np.array([t.number for t in done])
         y = np.array([t.value for t in done])
-        acc = np.maximum.accumulate if _maximize(study) else np.minimum.accumulate
+        acc = np.maximum.accumulate if maximize(study) else np.minimum.accumulate
         ax.scatter(x, y, s=14, alpha=0.7, label=f"completed ({len(done)})")
         ax.step(x, acc(y), where="post", color="k", lw=1.5, label="best so far")
         bottom = y.min() - 0.05 * max(np.ptp(y), 1e-9)
