@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import re
 
+PHI_NAMES = {"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}
+"""Φ's fields as a reader reads them; in RL, "lr" is a learning rate."""
+
 
 def param_name(key: str) -> str:
     """A study's parameter as a reader reads it: ``lr`` and ``lr_2`` (the leak rates) spelled out, since in RL

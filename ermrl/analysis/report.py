@@ -30,11 +30,9 @@ from ermrl.analysis.statistics import format_ci
 from ermrl.analysis.trials import completed, failed, maximize, n_reservoirs, phi, ranked, running_time
 from ermrl.errors import ConfigError
 from ermrl.evolution.heartbeat import WORKER_ATTR
-from ermrl.model_labels import param_name
+from ermrl.model_labels import PHI_NAMES, param_name
 
 MARKERS = ("o", "^", "s", "D", "v", "P", "*", "X")
-PHI_NAMES = {"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}
-"""Φ's fields as a reader reads them; in RL, "lr" is a learning rate."""
 
 
 def _hms(seconds: float) -> str:

@@ -9,8 +9,8 @@ import numpy as np
 
 from ermrl import storage
 from ermrl.evolution.convergence import Convergence
+from ermrl.model_labels import PHI_NAMES
 
-NAMES = {"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}
 
 Distributions = dict[int, dict[str, tuple[float, float]]]
 """{generation: {parameter: (mean Φ value, spread in decades)}}, as ``convergence.centers_and_spreads``."""
@@ -40,7 +40,7 @@ def figure(dists: Distributions, rule: Convergence, stop: int | None, title: str
     generations = sorted(dists)
     for name in sorted({n for d in dists.values() for n in d}):
         hp, _, k = name.partition("_")
-        ax.plot(generations, [dists[g][name][1] for g in generations], label=f"{NAMES.get(hp, hp)} {k}".strip())
+        ax.plot(generations, [dists[g][name][1] for g in generations], label=f"{PHI_NAMES.get(hp, hp)} {k}".strip())
     ax.axhline(rule.width, color="0.4", ls="--", lw=1, label=f"width {rule.width:g} decades")
     if stop is not None:
         ax.axvline(stop, color="C3", lw=1, label=f"converged: generation {stop} ({rule.generations} in a row)")

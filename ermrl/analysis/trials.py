@@ -20,13 +20,13 @@ def maximize(study: optuna.Study) -> bool:
 
 def completed(study: optuna.Study) -> list[FrozenTrial]:
     """Completed trials with a finite fitness, in trial-number order."""
-    return [t for t in study.trials
+    return [t for t in study.get_trials(deepcopy=False)
             if t.state == TrialState.COMPLETE and t.value is not None and math.isfinite(t.value)]
 
 
 def failed(study: optuna.Study) -> list[FrozenTrial]:
     """Failed trials, in trial-number order."""
-    return [t for t in study.trials if t.state == TrialState.FAIL]
+    return [t for t in study.get_trials(deepcopy=False) if t.state == TrialState.FAIL]
 
 
 def ranked(study: optuna.Study) -> list[FrozenTrial]:

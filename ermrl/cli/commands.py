@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ermrl.cli import common, configs, evolve, options
 from ermrl.errors import ConfigError
+from ermrl.model_labels import PHI_NAMES
 
 # -- parsers ---------------------------------------------------------------------------------------------
 
@@ -24,7 +25,7 @@ def add_parsers(sub, formatter) -> None:
     metavars = {"sr": "SR", "lr": "LEAK", "iss": "ISS"}  # not "LR": in RL that is a learning rate
     for name, default in DEFAULT_PHI._asdict().items():
         p.add_argument(*flags[name], dest=name, type=float, nargs="+", default=[default], metavar=metavars[name],
-                       help=f"{options.PHI_NAMES[name]}, one value or one per reservoir")
+                       help=f"{PHI_NAMES[name]}, one value or one per reservoir")
     options.refuse_lr(p, "--lr", "--leak-rate")
     p.add_argument("--seeds", type=int, default=3, help="number of seeds (FIRST..FIRST+N-1)")
     p.add_argument("--first-seed", type=int, default=0, metavar="FIRST",

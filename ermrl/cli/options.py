@@ -36,6 +36,7 @@ import textwrap
 from pathlib import Path
 
 from ermrl.errors import ConfigError
+from ermrl.model_labels import PHI_NAMES
 
 
 BASELINE_STORE_HELP = ("keep the trained PPO baselines in DIR and reuse them: a test phase whose baseline (env, seeds, "
@@ -325,7 +326,6 @@ AGENT_DESTS = ("reservoirs", "units", "bias", "rc_connectivity", "input_connecti
 """What every command that trains agents accepts (``train``, ``evolve``, ``baselines``)."""
 
 
-PHI_NAMES = {"sr": "spectral radius", "lr": "leak rate", "iss": "input scaling"}
 FLAG_NAMES = {"lr": "leak-rate"}
 """Φ's flags spell out the leak rate: in RL, "lr" is a learning rate (PPO's is ``--learning-rate``)."""
 LEAK_RATE_NOT_LR = ("{flag} is ambiguous: the reservoir's leak rate is {leak}, PPO's learning rate is "
