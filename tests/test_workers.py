@@ -21,11 +21,11 @@ from ermrl import provenance
 from ermrl.evolution.config import EvolveConfig
 from ermrl.evolution.evolve import evolve, make_trainers
 from ermrl.evolution.generations import FULL
-from ermrl.evolution.heartbeat import WORKER_ATTR
+from ermrl.evolution.heartbeat import INTERRUPTED, WORKER_ATTR
 from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import load_study, make_sampler, open_study
 from ermrl.evolution.worker_config import WorkerConfig
-from ermrl.evolution.workers import Worker
+from ermrl.evolution.workers import REDO_ATTR, STALE_REDO, TWICE_REDONE, Worker
 from ermrl.evolution.record import encode_study_record
 from ermrl.training import TrainConfig
 
@@ -201,13 +201,42 @@ def test_killed_and_frozen_workers_are_replaced(postgres_url, tmp_path, compiled
     for t in frozen:
         assert f"trial {t.number} was failed meanwhile ({LOST})" in results[sleeper][1]
     assert f"trial {killed[0].number} failed: interrupted; it will be redone" in results[survivor][1] + results[sleeper][1]
-    assert {t.user_attrs.get("failure") for t in trials if t.state == TrialState.FAIL} <= {"interrupted", LOST, FULL}
+    assert {t.user_attrs.get("failure") for t in trials if t.state == TrialState.FAIL} <= \
+        {"interrupted", LOST, FULL, STALE_REDO, TWICE_REDONE}
 
 
 def tiny(trials, popsize=4):
     train = TrainConfig(env_id="CartPoleNoVel-v1", total_timesteps=2048)
     return EvolveConfig(train=train, space=SearchSpace(fixed_iss=1.0), trials=trials, seeds=1, sampler="cmaes",
                         popsize=popsize)
+
+
+def test_a_stopped_trial_that_two_workers_enqueue_at_once_is_trained_once(tmp_path):
+    """Two workers read the study at the same moment and both see the same two trials of CMA-ES generation 1
+    stopped (both found the killed worker's process gone), so both enqueue their Φ. The lower-numbered copies are
+    trained; the others are failed at once, before they take a slot, and the generation's two other slots get fresh
+    draws: no Φ is trained twice. (Before, all four copies fit the generation's four slots: two Φ trained twice.)"""
+    config = tiny(trials=12)
+    study = open_study(f"journal:{tmp_path / 'studies.log'}", "s", make_sampler("cmaes", 4, 0),
+                       encode_study_record(config))
+    evolve(study, tiny(trials=4))
+    with Worker(study, config, WorkerConfig(batch=2)) as gone:
+        stopped = gone.claim().trials
+        gone.release(INTERRUPTED)
+    seen = study.get_trials(deepcopy=False)
+    for index in (1, 2):
+        Worker(study, config, WorkerConfig(batch=2, worker_index=index))._redo(seen, 1, 2)
+    lines = []
+    evolve(study, config, worker=WorkerConfig(batch=2), log=lines.append)
+    trials = study.get_trials(deepcopy=False)
+    complete = [t for t in trials if t.state == TrialState.COMPLETE]
+    assert len(complete) == 12 and len({tuple(sorted(t.params.items())) for t in complete}) == 12
+    assert [(t.number, t.user_attrs[REDO_ATTR]["trial"], t.params) for t in complete if REDO_ATTR in t.user_attrs] \
+        == [(6, 4, stopped[0].params), (7, 5, stopped[1].params)]
+    assert [(t.number, t.user_attrs.get("failure")) for t in trials if t.state == TrialState.FAIL] == \
+        [(4, INTERRUPTED), (5, INTERRUPTED), (8, TWICE_REDONE), (9, TWICE_REDONE)]
+    assert f"trial 8 failed: {TWICE_REDONE} (trial 6)" in lines and f"trial 9 failed: {TWICE_REDONE} (trial 7)" in lines
+    assert collections.Counter(t.user_attrs["generation"] for t in complete) == {0: 4, 1: 4, 2: 4}
 
 
 def test_ctrl_c_fails_the_workers_own_trials(tmp_path):

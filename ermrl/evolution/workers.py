@@ -43,6 +43,9 @@ REDO_ATTR = "redo_of"
 {"trial": its number, "generation": its generation}."""
 STALE_REDO = "its generation ended before it was redone"
 """The failure reason of a trial asked again whose generation other workers finished meanwhile (CMA-ES)."""
+TWICE_REDONE = "another worker asked the same Φ again first"
+"""The failure reason of a trial asked again for a stopped trial that a lower-numbered trial, not failed, is
+already asked again for: two workers that saw the stopped trial at once each enqueued its Φ."""
 
 
 def _suggest(space, trial: optuna.Trial) -> Phi:
@@ -298,6 +301,7 @@ class Worker:
                 trial = self.study.ask()
                 if self._survives(trial, self._adopt):
                     asked.append(trial)
+        asked = self._first_redos(asked)
         phis = {}
         for t in asked:
             if self._survives(t, lambda t: phis.__setitem__(t.number, _suggest(self.config.space, t))) \
@@ -322,6 +326,30 @@ class Worker:
             return None
         return Claim(kept, [phis[t.number] for t in kept], min(placed[t.number] for t in kept),
                      [placed[t.number] for t in kept], completed)
+
+    def _first_redos(self, asked: list[optuna.Trial]) -> list[optuna.Trial]:
+        """``asked`` less the trials asked again (``REDO_ATTR``) for a stopped trial that a lower-numbered trial,
+        not failed, is asked again for; those are failed (``TWICE_REDONE``). Two workers that read the study at
+        once may both enqueue a stopped trial's Φ; the lower number wins, so every Φ is trained once. The check
+        follows the ask: the winner was enqueued before the loser, so the loser's worker always sees it."""
+        redos = {t.number: t.user_attrs.get(REDO_ATTR) for t in asked}
+        if not any(isinstance(r, dict) for r in redos.values()):
+            return asked
+        first: dict[int, int] = {}
+        for t in sorted(self.study.get_trials(deepcopy=False), key=lambda t: t.number):
+            redo = t.user_attrs.get(REDO_ATTR)
+            if isinstance(redo, dict) and t.state != TrialState.FAIL:
+                first.setdefault(redo["trial"], t.number)
+        kept = []
+        for t in asked:
+            redo = redos[t.number]
+            if isinstance(redo, dict) and first.get(redo["trial"], t.number) != t.number:
+                self.heartbeat.remove(t._trial_id)
+                if fail_trial(self.study, t._trial_id, TWICE_REDONE):
+                    self.log(f"trial {t.number} failed: {TWICE_REDONE} (trial {first[redo['trial']]})")
+            else:
+                kept.append(t)
+        return kept
 
     def _adopt(self, trial: optuna.Trial) -> None:
         """Beats for a trial just asked, then names this worker in it (in this order: see
