@@ -189,7 +189,7 @@ def pace_line(p, study) -> str | None:
 
     from ermrl.evolution import convergence
     from ermrl.evolution.generations import generation_seconds
-    from ermrl.evolution.workers import duration_text
+    from ermrl.evolution.generations import duration_text
 
     trials = study.get_trials(deepcopy=False)
     size, limit = p.config.generation_size, p.config.trials

@@ -117,3 +117,13 @@ def generation_seconds(trials: list[FrozenTrial], size: int) -> float | None:
         return None
     last = by[max(full)]
     return (max(t.datetime_complete for t in last) - min(t.datetime_start for t in last)).total_seconds()
+
+
+def duration_text(seconds: float) -> str:
+    """A duration as the messages show it: '40 s', '41 min', '2 h 05 min', '19 h'."""
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    m = round(seconds / 60)
+    if m >= 600:
+        return f"{round(seconds / 3600)} h"
+    return f"{m} min" if m < 60 else f"{m // 60} h {m % 60:02d} min"

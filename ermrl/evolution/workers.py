@@ -26,7 +26,7 @@ from ermrl.agent import Phi
 from ermrl.errors import TERMINATED, OutOfTime, raise_terminated
 from ermrl.evolution import convergence
 from ermrl.evolution.config import EvolveConfig
-from ermrl.evolution.generations import ATTR, CMA_GENERATION, FULL, Ledger, generation_seconds
+from ermrl.evolution.generations import ATTR, CMA_GENERATION, FULL, Ledger, duration_text, generation_seconds
 from ermrl.evolution.heartbeat import (INTERRUPTED, LOST_PREFIX, WORKER_ATTR, Heartbeat, WorkerId, fail_lost, fail_trial,
                                        optuna_heartbeat)
 from ermrl.evolution.journal_file import JournalChanged
@@ -66,16 +66,6 @@ def _stopped(t: FrozenTrial) -> bool:
     reason = t.user_attrs.get("failure")
     return t.state == TrialState.FAIL and isinstance(reason, str) and (reason == INTERRUPTED
                                                                         or reason.startswith(LOST_PREFIX))
-
-
-def duration_text(seconds: float) -> str:
-    """A duration as the messages show it: '40 s', '41 min', '2 h 05 min', '19 h'."""
-    if seconds < 60:
-        return f"{seconds:.0f} s"
-    m = round(seconds / 60)
-    if m >= 600:
-        return f"{round(seconds / 3600)} h"
-    return f"{m} min" if m < 60 else f"{m // 60} h {m % 60:02d} min"
 
 
 @dataclasses.dataclass(frozen=True)
