@@ -188,8 +188,7 @@ def pace_line(p, study) -> str | None:
     from optuna.trial import TrialState
 
     from ermrl.evolution import convergence
-    from ermrl.evolution.generations import generation_seconds
-    from ermrl.evolution.generations import duration_text
+    from ermrl.evolution.generations import duration_text, generation_seconds
 
     trials = study.get_trials(deepcopy=False)
     size, limit = p.config.generation_size, p.config.trials

@@ -61,6 +61,11 @@ def _suggest(space, trial: optuna.Trial) -> Phi:
         return space.suggest(trial)
 
 
+def _redo_of(t: FrozenTrial | optuna.Trial) -> dict | None:
+    """``t``'s ``REDO_ATTR`` ({"trial", "generation"}) when it was asked again for a stopped trial, else None."""
+    return redo if isinstance(redo := t.user_attrs.get(REDO_ATTR), dict) else None
+
+
 def _stopped(t: FrozenTrial) -> bool:
     """Whether ``t`` failed because its worker stopped or was lost, not because of its Φ."""
     reason = t.user_attrs.get("failure")
@@ -226,7 +231,7 @@ class Worker:
         worker left failed and that nobody asked again yet (in number order), so that the generation trains the
         candidates drawn for it, and a snapshot of their training (``WorkerConfig.snapshots``) fits them."""
         names = set(self.config.space.distributions())
-        taken = {t.user_attrs[REDO_ATTR]["trial"] for t in trials if isinstance(t.user_attrs.get(REDO_ATTR), dict)}
+        taken = {redo["trial"] for redo in map(_redo_of, trials) if redo is not None}
         todo = [t for t in trials if _stopped(t) and t.number not in taken and set(t.params) == names
                 and self.ledger.label(t) == generation][:n]
         for t in todo:
@@ -301,8 +306,8 @@ class Worker:
                     del phis[t.number]
         placed = self._place([t for t in asked if t.number in phis])
         for t in asked:  # a trial asked again in a later generation than its own: its Φ is not of this distribution
-            redo = t.user_attrs.get(REDO_ATTR) if placed.get(t.number, -1) >= 0 else None
-            if isinstance(redo, dict) and self.ledger.cma and placed[t.number] != redo["generation"]:
+            redo = _redo_of(t) if placed.get(t.number, -1) >= 0 else None
+            if redo is not None and self.ledger.cma and placed[t.number] != redo["generation"]:
                 placed[t.number] = -1
                 if fail_trial(self.study, t._trial_id, STALE_REDO):
                     self.log(f"trial {t.number} failed: {STALE_REDO}")
@@ -318,22 +323,21 @@ class Worker:
                      [placed[t.number] for t in kept], completed)
 
     def _first_redos(self, asked: list[optuna.Trial]) -> list[optuna.Trial]:
-        """``asked`` less the trials asked again (``REDO_ATTR``) for a stopped trial that a lower-numbered trial,
-        not failed, is asked again for; those are failed (``TWICE_REDONE``). Two workers that read the study at
-        once may both enqueue a stopped trial's Φ; the lower number wins, so every Φ is trained once. The check
-        follows the ask: the winner was enqueued before the loser, so the loser's worker always sees it."""
-        redos = {t.number: t.user_attrs.get(REDO_ATTR) for t in asked}
-        if not any(isinstance(r, dict) for r in redos.values()):
+        """``asked`` less the trials asked again for a stopped trial that a lower-numbered trial, not failed, is
+        asked again for; those are failed (``TWICE_REDONE``). Two workers reading the study at once may both
+        enqueue a stopped trial's Φ; the lower number wins (enqueued first, its loser's worker always sees it)."""
+        redos = {t.number: _redo_of(t) for t in asked}
+        if not any(redos.values()):
             return asked
         first: dict[int, int] = {}
         for t in sorted(self.study.get_trials(deepcopy=False), key=lambda t: t.number):
-            redo = t.user_attrs.get(REDO_ATTR)
-            if isinstance(redo, dict) and t.state != TrialState.FAIL:
+            redo = _redo_of(t)
+            if redo is not None and t.state != TrialState.FAIL:
                 first.setdefault(redo["trial"], t.number)
         kept = []
         for t in asked:
             redo = redos[t.number]
-            if isinstance(redo, dict) and first.get(redo["trial"], t.number) != t.number:
+            if redo is not None and first.get(redo["trial"], t.number) != t.number:
                 self.heartbeat.remove(t._trial_id)
                 if fail_trial(self.study, t._trial_id, TWICE_REDONE):
                     self.log(f"trial {t.number} failed: {TWICE_REDONE} (trial {first[redo['trial']]})")
