@@ -59,6 +59,21 @@ def test_the_projection_extrapolates_each_parameters_rate_and_waits_for_the_slow
     assert convergence.project(narrow, rule).generation == 7 + 2
 
 
+def test_the_projection_history_repeats_the_projection_as_each_generation_stood():
+    """A steady shrink projects the same stop from every generation; a spread that stops shrinking shows as None
+    from the generation where the fit over the later half no longer falls."""
+    rule = Convergence(width=0.01, generations=3)
+    steady = {g: {"lr": 0.5 * 0.9 ** (g - 2), "sr": 0.2 * 0.8 ** (g - 2)} for g in range(2, 20)}
+    history = convergence.projection_history(steady, rule)
+    assert list(history) == list(range(10, 20))
+    assert history == pytest.approx({g: 2 + math.log(0.02) / math.log(0.9) + 2 for g in range(10, 20)})
+    assert list(convergence.projection_history(steady, rule, last=30)) == list(range(6, 20))  # from 5 generations
+    stalled = {g: {**v, "lr": 0.5 * 0.9 ** (min(g, 10) - 2) * 1.01 ** max(g - 10, 0)} for g, v in steady.items()}
+    history = convergence.projection_history(stalled, rule)
+    assert history[10] == pytest.approx(2 + math.log(0.02) / math.log(0.9) + 2)
+    assert history[19] is None and all(history[g] > history[10] for g in range(13, 19) if history[g] is not None)
+
+
 def test_fitness_correlations_rank_each_parameter_within_the_generations_asked():
     """Fitness that falls with sr and ignores lr: ρ = −1 for sr, near 0 for lr; trials outside the generations,
     failed or of another generation are left out."""
@@ -172,6 +187,11 @@ def test_a_study_cut_before_it_converged_is_projected_to_converge_near_where_it_
     assert 25 <= generation <= 36 and int(said.group(4).replace(",", "")) == (generation + 1) * 6
     projection = json.loads((tmp_path / "b" / "convergence.json").read_text())["projection"]
     assert (projection["window"], projection["generation"], projection["trial_limit"]) == ([12, 21], generation, 900)
+    history = json.loads((tmp_path / "b" / "convergence.json").read_text())["projection_history"]
+    assert list(history) == [str(g) for g in range(12, 22)] and history["21"] == generation
+    assert all(25 <= p <= 36 for p in history.values()), history  # the docstring of `project`: 25–34 from 10–32
+    assert (f"the same projection made at generations 12–21: {', '.join(str(p) for p in history.values())} (it "
+            "moves with the mean; read it as a range)") in run.stdout
     rho = json.loads((tmp_path / "b" / "convergence.json").read_text())["fitness_correlations"]
     assert set(rho) == {"lr", "sr"} and all(-1 <= v["rho"] <= 1 and 0 <= v["p"] <= 1 for v in rho.values())
     assert "fitness against each parameter over generations 12–21 (Spearman's ρ): lr " in run.stdout

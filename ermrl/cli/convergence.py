@@ -70,6 +70,7 @@ def cmd_convergence(args) -> int:
         print(f"study {args.study!r} has not converged by the rule ({rule.describe()}) in its {generations} "
               f"generations (0–{generations - 1}; {total} trials)")
         summary["projection"] = _projection(convergence.project(verdict.spread, rule), config)
+        summary["projection_history"] = _history(convergence.projection_history(verdict.spread, rule))
         if summary["projection"] is not None:
             summary["fitness_correlations"] = _correlations(trials, config, summary["projection"]["window"])
     else:
@@ -111,6 +112,16 @@ def _projection(projection, config) -> dict | None:
     print(f"  {projection.describe()}, {trials:,} trials: {limit} (a log-linear fit per parameter; a trend, not a "
           "promise)")
     return {**summary, "generation": generation, "trials": trials}
+
+
+def _history(history: dict[int, float | None]) -> dict[str, int | None]:
+    """Prints the projection as it was made at each of the last generations; returns {generation: projection}."""
+    said = {g: None if p is None else math.ceil(p) for g, p in history.items()}
+    if len(said) > 1:
+        cells = ", ".join("not shrinking" if p is None else f"{p:,}" for p in said.values())
+        print(f"  the same projection made at generations {min(said)}–{max(said)}: {cells} (it moves with the mean; "
+              "read it as a range)")
+    return {str(g): p for g, p in said.items()}
 
 
 def _correlations(trials, config, window) -> dict:

@@ -189,6 +189,20 @@ def project(spread: dict[int, dict[str, float]], rule: Convergence, window: int 
     return Projection((fitted[0], last), factors, None if math.isinf(stop) else stop)
 
 
+def projection_history(spread: dict[int, dict[str, float]], rule: Convergence, last: int = 10
+                       ) -> dict[int, float | None]:
+    """{generation g: the generation :func:`project` gave (None: a spread not shrinking) on the spreads up to g},
+    for each of the last ``last`` generations of ``spread`` with enough generations for a projection: how much the
+    projection moves from one generation to the next (on a study whose mean is still moving, a lot)."""
+    generations = sorted(spread)
+    out: dict[int, float | None] = {}
+    for g in generations[-last:]:
+        projection = project({k: spread[k] for k in generations if k <= g}, rule)
+        if projection is not None:
+            out[g] = projection.generation
+    return out
+
+
 def fitness_correlations(trials: list[FrozenTrial], space: SearchSpace, generations: tuple[int, int]
                          ) -> dict[str, tuple[float, float]]:
     """{parameter: (Spearman's ρ, its two-sided p-value)} of fitness against each searched parameter over the
