@@ -59,6 +59,24 @@ def test_the_projection_extrapolates_each_parameters_rate_and_waits_for_the_slow
     assert convergence.project(narrow, rule).generation == 7 + 2
 
 
+def test_the_recent_projection_sees_a_spread_that_narrows_again_after_it_widened():
+    """A spread that shrinks, widens for 12 generations and then shrinks again at × 0.9 for 8: the later half
+    (generations 16–30) averages the widening into no stop; the last 8 generations see the × 0.9 and project the
+    stop from it. With 16 generations or fewer the later half is no longer than 8 and there is no recent one."""
+    rule = Convergence(width=0.01, generations=3)
+    log_spread = {g: -1 - 0.05 * (g - 2) for g in range(2, 11)}
+    log_spread.update({g: log_spread[10] + 0.08 * (g - 10) for g in range(11, 23)})
+    log_spread.update({g: log_spread[22] + math.log10(0.9) * (g - 22) for g in range(23, 31)})
+    spread = {g: {"sr": 10 ** v, "lr": 0.001} for g, v in log_spread.items()}
+    assert convergence.project(spread, rule).window == (16, 30)
+    assert convergence.project(spread, rule).generation is None
+    recent = convergence.recent_projection(spread, rule)
+    assert recent.window == (23, 30) and recent.factors["sr"] == pytest.approx(0.9)
+    assert recent.generation == pytest.approx(30 + (-2 - log_spread[30]) / math.log10(0.9) + 2)
+    assert convergence.recent_projection({g: spread[g] for g in range(2, 19)}, rule).window == (11, 18)  # 17: 9 > 8
+    assert convergence.recent_projection({g: spread[g] for g in range(2, 18)}, rule) is None  # 16: the half is 8
+
+
 def test_the_projection_history_repeats_the_projection_as_each_generation_stood():
     """A steady shrink projects the same stop from every generation; a spread that stops shrinking shows as None
     from the generation where the fit over the later half no longer falls."""
@@ -187,6 +205,11 @@ def test_a_study_cut_before_it_converged_is_projected_to_converge_near_where_it_
     assert 25 <= generation <= 36 and int(said.group(4).replace(",", "")) == (generation + 1) * 6
     projection = json.loads((tmp_path / "b" / "convergence.json").read_text())["projection"]
     assert (projection["window"], projection["generation"], projection["trial_limit"]) == ([12, 21], generation, 900)
+    recent = json.loads((tmp_path / "b" / "convergence.json").read_text())["recent_projection"]
+    assert recent["window"] == [14, 21] and 25 <= recent["generation"] <= 36  # 20 generations of spread: half 10 > 8
+    assert re.search(rf"at the rates of generations 14–21 \(\w+'s spread shrinks slowest, × 0\.\d+ a generation\), the "
+                     rf"rule would hold at about generation {recent['generation']}, {(recent['generation'] + 1) * 6} "
+                     "trials: within", run.stdout), run.stdout
     history = json.loads((tmp_path / "b" / "convergence.json").read_text())["projection_history"]
     assert list(history) == [str(g) for g in range(12, 22)] and history["21"] == generation
     assert all(25 <= p <= 36 for p in history.values()), history  # the docstring of `project`: 25–34 from 10–32

@@ -17,7 +17,8 @@ def add_parser(sub, formatter) -> None:
                                    "evolve --until-converged` holds, with the trials that far and the compute they "
                                    "are of all the study's trials (OUT/convergence.json). On a study that has not "
                                    "converged it says where the rule would hold if each spread kept shrinking at "
-                                   "its rate of the later half of the generations, and Spearman's ρ of fitness "
+                                   "its rate of the later half of the generations (and of the last 8, once "
+                                   "the later half is longer), and Spearman's ρ of fitness "
                                    "against each parameter there. --copy-to writes the study "
                                    "as the rule would have left it (its trials up to that generation) to another "
                                    "storage, where `ermrl select` and `ermrl test` run as on any study.",
@@ -70,6 +71,7 @@ def cmd_convergence(args) -> int:
         print(f"study {args.study!r} has not converged by the rule ({rule.describe()}) in its {generations} "
               f"generations (0–{generations - 1}; {total} trials)")
         summary["projection"] = _projection(convergence.project(verdict.spread, rule), config)
+        summary["recent_projection"] = _projection(convergence.recent_projection(verdict.spread, rule), config)
         summary["projection_history"] = _history(convergence.projection_history(verdict.spread, rule))
         if summary["projection"] is not None:
             summary["fitness_correlations"] = _correlations(trials, config, summary["projection"]["window"])

@@ -161,6 +161,10 @@ class Projection:
 MIN_WINDOW = 5
 """The fewest generations a projection is fitted on."""
 
+RECENT_WINDOW = 8
+"""The generations of the recent projection that ``ermrl convergence`` gives beside the default one once the later
+half is longer: the later half can average a spread that narrows again over a stretch where it widened."""
+
 
 def project(spread: dict[int, dict[str, float]], rule: Convergence, window: int | None = None) -> Projection | None:
     """Fits each parameter's log10 spread against the generation over the last ``window`` generations of
@@ -187,6 +191,14 @@ def project(spread: dict[int, dict[str, float]], rule: Convergence, window: int 
             reach.append(math.inf)
     stop = max(reach) + rule.generations - 1
     return Projection((fitted[0], last), factors, None if math.isinf(stop) else stop)
+
+
+def recent_projection(spread: dict[int, dict[str, float]], rule: Convergence) -> Projection | None:
+    """:func:`project` on the last :data:`RECENT_WINDOW` generations of ``spread``, or None while the later half
+    (the default projection's window) is no longer than that."""
+    if (len(spread) + 1) // 2 <= RECENT_WINDOW:
+        return None
+    return project(spread, rule, window=RECENT_WINDOW)
 
 
 def projection_history(spread: dict[int, dict[str, float]], rule: Convergence, last: int = 10
