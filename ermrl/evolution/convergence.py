@@ -166,13 +166,19 @@ RECENT_WINDOW = 8
 half is longer: the later half can average a spread that narrows again over a stretch where it widened."""
 
 
+def _later_half(generations: int) -> int:
+    """The default projection's window for a spread of ``generations`` generations: the later half, at least
+    :data:`MIN_WINDOW`."""
+    return max(MIN_WINDOW, (generations + 1) // 2)
+
+
 def project(spread: dict[int, dict[str, float]], rule: Convergence, window: int | None = None) -> Projection | None:
     """Fits each parameter's log10 spread against the generation over the last ``window`` generations of
     ``spread`` (default: the later half, at least :data:`MIN_WINDOW`) and returns where ``rule`` would hold at
     those rates; None when ``spread`` has fewer than :data:`MIN_WINDOW` generations. On the paper's 900-trial
     CartPoleNoVel study, fitted at any generation from 10 to 32 it says 25–34; the rule holds at 32."""
     generations = sorted(spread)
-    size = max(MIN_WINDOW, (len(generations) + 1) // 2) if window is None else window
+    size = _later_half(len(generations)) if window is None else window
     if size < 2:
         raise ConfigError(f"`window` must be >= 2 generations, got {window}", owner=project)
     if len(generations) < max(size, MIN_WINDOW):
@@ -196,7 +202,7 @@ def project(spread: dict[int, dict[str, float]], rule: Convergence, window: int 
 def recent_projection(spread: dict[int, dict[str, float]], rule: Convergence) -> Projection | None:
     """:func:`project` on the last :data:`RECENT_WINDOW` generations of ``spread``, or None while the later half
     (the default projection's window) is no longer than that."""
-    if (len(spread) + 1) // 2 <= RECENT_WINDOW:
+    if _later_half(len(spread)) <= RECENT_WINDOW:
         return None
     return project(spread, rule, window=RECENT_WINDOW)
 
