@@ -220,6 +220,7 @@ def test_a_study_cut_before_it_converged_is_projected_to_converge_near_where_it_
     assert "fitness against each parameter over generations 12–21 (Spearman's ρ): lr " in run.stdout
     factor = projection["factors"][said.group(1)]
     assert 0.7 < factor < 1 and factor == pytest.approx(float(said.group(2)), abs=5e-4)
+    _paces_the_cut_study_by_both_trends(cut, generation, recent["generation"])
     load_study(cut, PAPER_STUDY).set_user_attr("converged", None)  # as if evolved without --until-converged
     report = cli("report", "--study", PAPER_STUDY, "--storage", cut, "--out", tmp_path / "report")
     assert report.returncode == 0, report.stderr
@@ -277,6 +278,35 @@ def test_evolve_until_converged_stops_records_why_and_a_rerun_does_nothing(tmp_p
     page = (tmp_path / "s" / "report.html").read_text()
     assert "stopped: CMA-ES converged at generation 2 (6 trials)" in page and 'alt="Φ spread per generation"' in page
     assert (tmp_path / "s" / "phi_spread.png").stat().st_size > 10_000
+
+
+def _paces_the_cut_study_by_both_trends(cut, generation, recent):
+    """`experiment run`'s line for the cut study, resumed at a scale that stops at convergence, and the line a
+    worker logs for its generation: both projections."""
+    import dataclasses
+
+    from ermrl.cli.experiment import pace_line
+    from ermrl.experiments import registry, runner
+
+    (plan,) = [p for p in runner.plan(registry.get("partial-observability"), registry.get_scale("paper"), Path("."))
+               if p.study == PAPER_STUDY]
+    line = pace_line(dataclasses.replace(plan, until_converged=Convergence()), load_study(cut, PAPER_STUDY))
+    duration = r"(\d+ s|\d+ min|\d+ h( \d\d min)?)"
+    assert re.fullmatch(rf"  {PAPER_STUDY}: {duration} a generation \(its last one\): 128 more to its trial limit, "
+                        rf"about {duration}; the trend of its spread \(`ermrl convergence`\) puts the stop near "
+                        rf"generation {generation}, {generation - 21} more, about {duration} \(the trend of its last 8 "
+                        rf"generations: generation {recent}\)", line), line
+    from ermrl.evolution.worker_config import WorkerConfig
+    from ermrl.evolution.workers import Worker
+
+    study, lines = load_study(cut, PAPER_STUDY), []
+    study.sampler = optuna.samplers.CmaEsSampler()  # as `ermrl evolve` opens it
+    worker = Worker(study, plan.config, WorkerConfig(until_converged=Convergence()), lines.append)
+    assert not worker._converged(study.get_trials(deepcopy=False))  # as it checks before claiming
+    fit = r"\(\w+'s spread shrinks slowest, × 0\.\d+ a generation\), the rule would hold at about generation"
+    assert len(lines) == 1 and re.fullmatch(
+        rf"generation 21: widest spread [\d.]+ decades \(\w+\), 0.01 to converge; at the rates of generations 12–21 "
+        rf"{fit} {generation}; at the rates of generations 14–21 {fit} {recent}", lines[0]), lines
 
 
 def test_evolve_until_converged_logs_each_generations_spread_and_the_projected_stop(tmp_path):

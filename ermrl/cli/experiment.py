@@ -182,7 +182,8 @@ def estimate_lines(plans: list, scale: Scale, done: dict[str, int], left: dict[s
 def pace_line(p, study) -> str | None:
     """For a study still evolving with a generation completed, its remaining evolution at the pace of its last
     generation (as recorded in the study, on whatever machine ran it), and, at a scale that stops at convergence,
-    where the trend of CMA-ES's spread (`ermrl convergence`) puts the stop; None for any other study."""
+    where the trend of CMA-ES's spread (`ermrl convergence`) puts the stop, by the later half of its generations and,
+    once that is longer, by the last :data:`~ermrl.evolution.convergence.RECENT_WINDOW`; None for any other study."""
     import math
 
     from optuna.trial import TrialState
@@ -205,12 +206,19 @@ def pace_line(p, study) -> str | None:
     projection = None if verdict.generation is not None else convergence.project(verdict.spread, p.until_converged)
     if projection is None:
         return line
+    recent = convergence.recent_projection(verdict.spread, p.until_converged)
+    if recent is not None:  # the later half can average over a stretch where the spread widened
+        at = "not shrinking" if recent.generation is None else f"generation {math.ceil(recent.generation):,}"
+        recent_text = f" (the trend of its last {convergence.RECENT_WINDOW} generations: {at})"
+    else:
+        recent_text = ""
     if projection.generation is None:
-        return line + "; its spread is not shrinking (`ermrl convergence`), so it will likely run to that limit"
+        return line + ("; its spread is not shrinking (`ermrl convergence`), so it will likely run to that limit"
+                       + recent_text)
     stop = math.ceil(projection.generation)  # the last generation it trains
     if (stop + 1) * size >= limit:
         return line + (f"; the trend of its spread (`ermrl convergence`) puts the stop near generation {stop:,}, "
-                       "beyond that limit")
+                       f"beyond that limit{recent_text}")
     more = max(stop + 1 - done // size, 0)
     return line + (f"; the trend of its spread (`ermrl convergence`) puts the stop near generation {stop:,}, "
-                   f"{more} more, about {duration_text(more * took)}")
+                   f"{more} more, about {duration_text(more * took)}{recent_text}")

@@ -260,14 +260,15 @@ class Worker:
             self._log_spread(convergence.judge(self.study, self.config.space, self.config.generation_size, rule), rule)
 
     def _log_spread(self, verdict: convergence.Verdict, rule: convergence.Convergence) -> None:
-        """Logs, once per generation sampled from a new distribution, its widest spread and the projected stop."""
+        """Logs, once per generation sampled from a new distribution, its widest spread and the projected stop (by
+        the later half of the generations and, once that is longer, by the recent ones)."""
         if not verdict.spread or max(verdict.spread) == self._spread_logged:
             return
         self._spread_logged = latest = max(verdict.spread)
         name, widest = max(verdict.spread[latest].items(), key=lambda kv: kv[1])
-        projection = convergence.project(verdict.spread, rule)
+        projections = (convergence.project(verdict.spread, rule), convergence.recent_projection(verdict.spread, rule))
         self.log(f"generation {latest}: widest spread {widest:.3g} decades ({name}), {rule.width:g} to converge"
-                 + ("" if projection is None else f"; {projection.describe()}"))
+                 + "".join(f"; {projection.describe()}" for projection in projections if projection is not None))
 
     def _trials(self) -> list[FrozenTrial]:
         """The study's trials, after failing those of workers that are gone."""
