@@ -260,8 +260,7 @@ class Worker:
             self._log_spread(convergence.judge(self.study, self.config.space, self.config.generation_size, rule), rule)
 
     def _log_spread(self, verdict: convergence.Verdict, rule: convergence.Convergence) -> None:
-        """Logs, once per generation sampled from a new distribution, its widest spread and the projected stop (by
-        the later half of the generations and, once that is longer, by the recent ones)."""
+        """Logs, once per generation sampled from a new distribution, its widest spread and the projected stops."""
         if not verdict.spread or max(verdict.spread) == self._spread_logged:
             return
         self._spread_logged = latest = max(verdict.spread)
