@@ -74,6 +74,40 @@ def test_a_shorter_journal_is_named_and_nothing_is_appended(tmp_path):
     assert path.read_bytes() == older
 
 
+def test_an_append_that_waits_for_the_lock_checks_the_file_once_it_holds_it(tmp_path):
+    """A tell whose append waits for another writer's lock while the file is put back to an older copy is refused
+    when it gets the lock, and writes nothing: the check is made under the lock, just before the write."""
+    import threading
+
+    from ermrl.atomic import journal_lock
+
+    path = tmp_path / "studies.log"
+    mine = _study(path, create=True)
+    _trials(mine, 2)
+    older = path.read_bytes()
+    _trials(mine, 1)
+    trial = mine.ask({"x": optuna.distributions.FloatDistribution(0, 1)})
+    other = journal_lock(path)
+    assert other.acquire()  # another writer's append under way
+    refused: list[JournalChanged] = []
+
+    def tell() -> None:
+        try:
+            mine.tell(trial, 0.5)
+        except JournalChanged as e:
+            refused.append(e)
+
+    thread = threading.Thread(target=tell)
+    thread.start()
+    time.sleep(0.5)  # its reads are done and checked; its append waits for the lock
+    assert thread.is_alive()
+    path.write_bytes(older)
+    other.release()
+    thread.join(30)
+    assert len(refused) == 1 and "was rewritten while this run used it" in str(refused[0]), refused
+    assert path.read_bytes() == older
+
+
 def test_a_journal_removed_under_a_run_is_named(tmp_path):
     path = tmp_path / "studies.log"
     mine = _study(path, create=True)
