@@ -200,8 +200,9 @@ def test_an_evolution_stops_within_its_generation_once_its_heartbeat_finds_the_j
         first_trial = next(k for k, line in enumerate(lines) if b'"op_code":4' in line)
         older = b"".join(lines[:first_trial])  # the study as an earlier commit held it, before these trials
         journal.write_bytes(older)
-        # The first PPO iteration (where the stop is raised) waits for XLA to compile the population's program: on
-        # a cold compilation cache beside the suite's other workers that took over 2 min; the generation is hours.
+        # The stop is raised at the first PPO iteration, which waits for XLA to compile the population's program: on
+        # a cold compilation cache beside the suite's other workers it once came after more than 2 min; the
+        # generation would take hours.
         _, err = proc.communicate(timeout=600)
     finally:
         proc.kill()
