@@ -23,14 +23,15 @@ from ermrl.evolution.search_space import SearchSpace
 from ermrl.evolution.study import make_sampler, open_study
 from ermrl.evolution.record import encode_study_record
 from ermrl.evolution.worker_config import WorkerConfig
+from ermrl.ppo.config import SB3_DEFAULTS, PPOConfig
 from ermrl.training import TrainConfig
 
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 
-def _configs(env_id: str, timesteps: int, backend: str = "auto") -> list[EvolveConfig]:
+def _configs(env_id: str, timesteps: int, backend: str = "auto", ppo: PPOConfig = SB3_DEFAULTS) -> list[EvolveConfig]:
     """Two studies of one shape that differ in what they search: another sampler seed, and iss searched or fixed."""
-    train = TrainConfig(env_id=env_id, total_timesteps=timesteps, backend=backend)
+    train = TrainConfig(env_id=env_id, total_timesteps=timesteps, backend=backend, ppo=ppo)
     a = EvolveConfig(train=train, space=SearchSpace(fixed_iss=1.0), trials=6, seeds=2, popsize=2, sampler_seed=0)
     return [a, dataclasses.replace(a, space=SearchSpace(), sampler_seed=1)]
 
@@ -45,12 +46,14 @@ def _trials(study: optuna.Study) -> list[tuple]:
              t.user_attrs["seed_fitness"]) for t in study.trials]
 
 
-@pytest.mark.parametrize("env_id, timesteps, backend", [
-    ("CartPoleNoVel-v1", 2048, "auto"),
-    ("Swimmer-v5", 4096, "mujoco"),  # two updates: an agent's update and its orthogonal init do not see the others
+@pytest.mark.parametrize("env_id, timesteps, backend, ppo", [
+    ("CartPoleNoVel-v1", 2048, "auto", SB3_DEFAULTS),
+    # two updates of 512 steps: an agent's update and its orthogonal init do not see the others; one 1000-step
+    # episode for a fitness (MuJoCo's physics, not the compile, is the cost here, so the rollouts are short)
+    ("Swimmer-v5", 1024, "mujoco", dataclasses.replace(SB3_DEFAULTS, n_steps=512)),
 ])
-def test_studies_trained_as_one_population_get_the_trials_they_get_alone(env_id, timesteps, backend, tmp_path):
-    configs = _configs(env_id, timesteps, backend)
+def test_studies_trained_as_one_population_get_the_trials_they_get_alone(env_id, timesteps, backend, ppo, tmp_path):
+    configs = _configs(env_id, timesteps, backend, ppo)
     alone = []
     for k, config in enumerate(configs):
         study = _open(tmp_path, f"alone{k}", config)
